@@ -1,0 +1,25 @@
+"""Benchmarks: median of repeated runs with OpenCL event times per stage, warm-up excluded,
+written as JSON (and CSV) under ``--out``. Subcommands: ``lbm``, ``bvh``, ``render``."""
+
+from __future__ import annotations
+
+import importlib
+
+#: (name, module, help); each module exposes add_arguments(parser) and run(args).
+BENCHES = [
+]
+
+
+def add_arguments(p) -> None:
+    sub = p.add_subparsers(dest="bench", metavar="BENCH", required=True)
+    for name, module, help_text in BENCHES:
+        mod = importlib.import_module(module)
+        q = sub.add_parser(name, help=help_text, description=(mod.__doc__ or help_text).strip())
+        q.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
+        q.add_argument("--out", default="out/bench", help="folder for the JSON/CSV results")
+        mod.add_arguments(q)
+        q.set_defaults(_bench_run=mod.run)
+
+
+def run(args) -> int:
+    return args._bench_run(args)

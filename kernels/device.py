@@ -1,0 +1,152 @@
+"""Choosing an OpenCL device: a GPU first, PoCL's CPU device as the embedded fallback.
+
+A device is named by a *spec*: ``"gpu"``, ``"cpu"``, ``"P:D"`` (platform and device index, as in
+``PYOPENCL_CTX``), ``"P"`` or a case-insensitive substring of the platform or device name
+(``"pocl"``, ``"nvidia"``, ``"h100"``). The spec comes from the caller (``--device``), else
+``LBWATER_DEVICE``, else ``PYOPENCL_CTX``, else the default order.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass
+
+import pyopencl as cl
+
+#: Extensions that matter to lbwater, reported by ``lbwater devices``.
+RELEVANT_EXTENSIONS = (
+    "cl_khr_fp64",
+    "cl_khr_fp16",
+    "cl_khr_global_int32_base_atomics",
+    "cl_khr_int64_base_atomics",
+    "cl_khr_gl_sharing",
+    "cl_khr_subgroups",
+    "cl_nv_device_attribute_query",
+)
+
+
+class DeviceError(ValueError):
+    """No OpenCL device matches a request, or no OpenCL platform exists at all."""
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """What ``lbwater devices`` reports about one device."""
+
+    spec: str
+    platform: str
+    name: str
+    type: str
+    compute_units: int
+    global_mem_mib: int
+    max_alloc_mib: int
+    local_mem_kib: int
+    max_work_group_size: int
+    opencl_version: str
+    driver_version: str
+    extensions: tuple[str, ...]
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _platforms() -> list[cl.Platform]:
+    try:
+        return cl.get_platforms()
+    except cl.Error as exc:  # pyopencl raises LogicError when no ICD is installed
+        raise DeviceError(f"no OpenCL platform found ({exc}); install pocl-binary-distribution "
+                          "or a GPU driver") from None
+
+
+def _type_name(device: cl.Device) -> str:
+    t = device.type
+    for flag, name in ((cl.device_type.GPU, "GPU"), (cl.device_type.CPU, "CPU"),
+                       (cl.device_type.ACCELERATOR, "ACCELERATOR")):
+        if t & flag:
+            return name
+    return "OTHER"
+
+
+def _all_devices() -> list[tuple[str, cl.Platform, cl.Device]]:
+    out = []
+    for ip, platform in enumerate(_platforms()):
+        try:
+            devices = platform.get_devices()
+        except cl.Error:
+            continue
+        for idev, device in enumerate(devices):
+            out.append((f"{ip}:{idev}", platform, device))
+    return out
+
+
+def describe(spec: str, platform: cl.Platform, device: cl.Device) -> DeviceInfo:
+    """Collect the facts about one device that the CLI and the benchmarks print."""
+    exts = set(device.extensions.split())
+    return DeviceInfo(
+        spec=spec,
+        platform=platform.name.strip(),
+        name=device.name.strip(),
+        type=_type_name(device),
+        compute_units=int(device.max_compute_units),
+        global_mem_mib=int(device.global_mem_size >> 20),
+        max_alloc_mib=int(device.max_mem_alloc_size >> 20),
+        local_mem_kib=int(device.local_mem_size >> 10),
+        max_work_group_size=int(device.max_work_group_size),
+        opencl_version=device.version.strip(),
+        driver_version=device.driver_version.strip(),
+        extensions=tuple(e for e in RELEVANT_EXTENSIONS if e in exts),
+    )
+
+
+def list_devices() -> list[DeviceInfo]:
+    """Every OpenCL device on this machine, in ``P:D`` order."""
+    return [describe(spec, p, d) for spec, p, d in _all_devices()]
+
+
+def _default_order(candidates):
+    gpus = [c for c in candidates if c[2].type & cl.device_type.GPU]
+    pocl = [c for c in candidates if "portable computing language" in c[1].name.lower()
+            or "pocl" in c[1].name.lower()]
+    return gpus + pocl + [c for c in candidates if c not in gpus and c not in pocl]
+
+
+def _match(spec: str, candidates):
+    s = spec.strip().lower()
+    if s in ("", "default", "auto"):
+        return _default_order(candidates)
+    if s in ("gpu", "cpu", "accelerator"):
+        flag = {"gpu": cl.device_type.GPU, "cpu": cl.device_type.CPU,
+                "accelerator": cl.device_type.ACCELERATOR}[s]
+        return _default_order([c for c in candidates if c[2].type & flag])
+    head = s.split(":")
+    if all(part.isdigit() for part in head if part) and head[0]:
+        if len(head) == 1 or head[1] == "":
+            return [c for c in candidates if c[0].split(":")[0] == head[0]]
+        return [c for c in candidates if c[0] == f"{int(head[0])}:{int(head[1])}"]
+    return [c for c in candidates
+            if s in c[1].name.lower() or s in c[2].name.lower()]
+
+
+def resolve_spec(spec: str | None = None) -> tuple[str, str]:
+    """The spec in force and where it came from (argument, environment variable or default)."""
+    if spec:
+        return spec, "--device"
+    for var in ("LBWATER_DEVICE", "PYOPENCL_CTX"):
+        if os.environ.get(var):
+            return os.environ[var], var
+    return "default", "default"
+
+
+def select_device(spec: str | None = None) -> cl.Device:
+    """The device named by ``spec`` (see the module docstring), or the default one."""
+    spec, origin = resolve_spec(spec)
+    candidates = _all_devices()
+    if not candidates:
+        raise DeviceError("no OpenCL device found; install pocl-binary-distribution "
+                          "or a GPU driver")
+    matches = _match(spec, candidates)
+    if not matches:
+        names = ", ".join(f"{c[0]} {c[2].name.strip()}" for c in candidates)
+        raise DeviceError(f"no OpenCL device matches {origin}={spec!r}; available: {names} "
+                          "(use gpu, cpu, P:D or part of a name)")
+    return matches[0][2]

@@ -1,0 +1,161 @@
+"""One OpenCL context and profiling queue per device, with program and kernel caches.
+
+Programs are built from the ``.cl`` files beside this module with ``-I`` pointing here, so sources
+use real ``#include "common.h"``. Build-time constants are passed as ``-D`` defines (part of the
+cache key); a hash of every header is added too, so no driver cache survives a header edit.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pyopencl as cl
+
+from kernels.device import select_device
+from kernels.timing import StageTimer
+
+KERNEL_DIR = Path(__file__).resolve().parent
+
+
+class KernelBuildError(RuntimeError):
+    """A ``.cl`` program failed to compile; the message names the file and carries the log."""
+
+
+def _source_hash() -> str:
+    h = hashlib.sha1()
+    for path in sorted(KERNEL_DIR.glob("*.h")) + sorted(KERNEL_DIR.glob("*.cl")):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def _format_define(name: str, value) -> str:
+    if value is None or value is True:
+        return f"-D{name}"
+    if isinstance(value, float | np.floating):
+        return f"-D{name}={float(value)!r}f"
+    return f"-D{name}={value}"
+
+
+class Runtime:
+    """A device, its context and its profiling queue; builds and caches programs and kernels."""
+
+    def __init__(self, device: cl.Device | str | None = None, *, profiling: bool = True):
+        self.device = device if isinstance(device, cl.Device) else select_device(device)
+        self.context = cl.Context([self.device])
+        props = cl.command_queue_properties.PROFILING_ENABLE if profiling else 0
+        self.queue = cl.CommandQueue(self.context, self.device, properties=props)
+        self.timer = StageTimer(enabled=profiling)
+        self._programs: dict[tuple, cl.Program] = {}
+        self._kernels: dict[tuple, cl.Kernel] = {}
+        self._hash = _source_hash()
+
+    # -- facts ------------------------------------------------------------------------------
+    @property
+    def name(self) -> str:
+        return self.device.name.strip()
+
+    @property
+    def is_gpu(self) -> bool:
+        return bool(self.device.type & cl.device_type.GPU)
+
+    @property
+    def is_pocl(self) -> bool:
+        return "portable computing language" in self.device.platform.name.lower()
+
+    # -- builds -----------------------------------------------------------------------------
+    def program(self, source: str, defines: dict | None = None) -> cl.Program:
+        """The built program for ``kernels/<source>`` with ``defines``; built once per key."""
+        key = (source, tuple(sorted((defines or {}).items())))
+        prg = self._programs.get(key)
+        if prg is not None:
+            return prg
+        path = KERNEL_DIR / source
+        if not path.is_file():
+            raise KernelBuildError(f"kernel source {path} does not exist")
+        options = [f"-I{KERNEL_DIR}", f"-DLBWATER_SRC_HASH=0x{self._hash}",
+                   "-cl-std=CL1.2"]
+        options += [_format_define(k, v) for k, v in key[1]]
+        text = f'#line 1 "{path.name}"\n' + path.read_text()
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", cl.CompilerWarning)
+                prg = cl.Program(self.context, text).build(options=options)
+        except cl.RuntimeError as exc:
+            log = str(exc).strip()
+            raise KernelBuildError(
+                f"{path.name}: OpenCL build failed on {self.name} with options "
+                f"{' '.join(options[1:])}\n{log}") from None
+        self._programs[key] = prg
+        return prg
+
+    def kernel(self, source: str, name: str, defines: dict | None = None) -> cl.Kernel:
+        """Kernel ``name`` of ``kernels/<source>``; looked up once and reused."""
+        key = (source, name, tuple(sorted((defines or {}).items())))
+        k = self._kernels.get(key)
+        if k is None:
+            prg = self.program(source, defines)
+            try:
+                k = cl.Kernel(prg, name)
+            except cl.Error as exc:
+                raise KernelBuildError(f"{source}: no kernel named {name!r} ({exc})") from None
+            self._kernels[key] = k
+        return k
+
+    # -- launches ---------------------------------------------------------------------------
+    def launch(self, stage: str, kernel: cl.Kernel, global_size, local_size=None, *,
+               wait_for=None) -> cl.Event:
+        """Enqueue ``kernel`` (its arguments already bound) and time it as ``stage``.
+
+        ``global_size`` is rounded up to a multiple of ``local_size``; kernels guard their index.
+        """
+        gs = tuple(int(g) for g in np.atleast_1d(global_size))
+        ls = None if local_size is None else tuple(int(v) for v in np.atleast_1d(local_size))
+        if ls is not None:
+            gs = tuple(-(-g // w) * w for g, w in zip(gs, ls, strict=True))
+        evt = cl.enqueue_nd_range_kernel(self.queue, kernel, gs, ls, wait_for=wait_for)
+        return self.timer.record(stage, evt)
+
+    def record(self, stage: str, event: cl.Event) -> cl.Event:
+        """Time an event that did not come from :meth:`launch` (a copy, a fill)."""
+        return self.timer.record(stage, event)
+
+    def finish(self) -> None:
+        self.queue.finish()
+
+    # -- buffers ----------------------------------------------------------------------------
+    def buffer(self, nbytes: int, flags=cl.mem_flags.READ_WRITE) -> cl.Buffer:
+        return cl.Buffer(self.context, flags, size=max(int(nbytes), 4))
+
+    def to_device(self, array: np.ndarray, flags=cl.mem_flags.READ_WRITE) -> cl.Buffer:
+        array = np.ascontiguousarray(array)
+        if array.nbytes == 0:
+            return self.buffer(4, flags)
+        return cl.Buffer(self.context, flags | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
+
+    def to_host(self, buf: cl.Buffer, dtype, count: int) -> np.ndarray:
+        out = np.empty(count, dtype=dtype)
+        if count:
+            cl.enqueue_copy(self.queue, out, buf)
+        return out
+
+
+_RUNTIMES: dict[str, Runtime] = {}
+
+
+def get_runtime(device: str | cl.Device | Runtime | None = None) -> Runtime:
+    """The shared runtime for ``device`` (a spec, a ``cl.Device``, a Runtime or None)."""
+    if isinstance(device, Runtime):
+        return device
+    if isinstance(device, cl.Device):
+        key = f"dev:{device.int_ptr}"
+    else:
+        key = device or os.environ.get("LBWATER_DEVICE") or os.environ.get("PYOPENCL_CTX") or ""
+    rt = _RUNTIMES.get(key)
+    if rt is None:
+        rt = _RUNTIMES[key] = Runtime(device)
+    return rt

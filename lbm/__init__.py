@@ -1,0 +1,1 @@
+"""Shallow-water Lattice-Boltzmann solver (D2Q9 LABSWE) on OpenCL."""

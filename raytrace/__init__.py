@@ -1,0 +1,1 @@
+"""GPU BVH (LBVH build, refit, two-level instances), ray queries and the wavefront renderer."""

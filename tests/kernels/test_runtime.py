@@ -1,0 +1,74 @@
+"""The device layer: selection, builds with includes/defines, kernel reuse, errors, timing."""
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+import kernels.runtime as runtime_mod
+from kernels import DeviceError, KernelBuildError, Runtime, list_devices, select_device
+from kernels.bandwidth import measure_copy_bandwidth
+
+
+def test_default_device_exists_and_lists():
+    infos = list_devices()
+    assert infos, "PoCL (pocl-binary-distribution) should always provide a device"
+    dev = select_device()
+    assert any(i.name == dev.name.strip() for i in infos)
+    assert all(":" in i.spec and i.compute_units > 0 for i in infos)
+
+
+def test_select_by_type_and_index():
+    cpu = select_device("cpu")
+    assert cpu.type & cl.device_type.CPU
+    assert select_device("0:0").name == cl.get_platforms()[0].get_devices()[0].name
+
+
+def test_unknown_spec_names_value_and_choices(monkeypatch):
+    with pytest.raises(DeviceError, match=r"no-such-gpu.*available"):
+        select_device("no-such-gpu")
+    monkeypatch.setenv("LBWATER_DEVICE", "nope")
+    with pytest.raises(DeviceError, match="LBWATER_DEVICE='nope'"):
+        select_device()
+
+
+def test_pyopencl_ctx_is_honoured(monkeypatch):
+    monkeypatch.delenv("LBWATER_DEVICE", raising=False)
+    monkeypatch.setenv("PYOPENCL_CTX", "99:0")
+    with pytest.raises(DeviceError, match="PYOPENCL_CTX"):
+        select_device()
+
+
+def test_kernel_lookup_is_cached_and_copy_is_exact(rt):
+    k1 = rt.kernel("bandwidth.cl", "copy_float4")
+    assert rt.kernel("bandwidth.cl", "copy_float4") is k1
+    src = np.random.default_rng(0).random(64 * 4, dtype=np.float32)
+    d_src = rt.to_device(src)
+    d_dst = rt.buffer(src.nbytes)
+    k1.set_args(d_src, d_dst, np.uint32(64))
+    rt.launch("test.copy", k1, 64, 16)
+    assert np.array_equal(rt.to_host(d_dst, np.float32, src.size), src)
+    times = rt.timer.collect()
+    assert set(times) == {"test.copy"} and times["test.copy"] >= 0
+    assert rt.timer.collect() == {}
+
+
+def test_defines_are_part_of_the_cache_key(rt):
+    a = rt.program("bandwidth.cl", {"FOO": 1})
+    b = rt.program("bandwidth.cl", {"FOO": 2})
+    assert a is not b and rt.program("bandwidth.cl", {"FOO": 1}) is a
+
+
+def test_build_error_names_file_and_carries_log(tmp_path, monkeypatch, rt):
+    (tmp_path / "broken.cl").write_text("__kernel void k(__global float* x) { x[0] = y; }\n")
+    monkeypatch.setattr(runtime_mod, "KERNEL_DIR", tmp_path)
+    fresh = Runtime(rt.device)
+    with pytest.raises(KernelBuildError, match="broken.cl") as info:
+        fresh.program("broken.cl")
+    assert "y" in str(info.value) and "\n" in str(info.value)
+    with pytest.raises(KernelBuildError, match="does not exist"):
+        fresh.program("missing.cl")
+
+
+def test_copy_bandwidth_is_positive(rt):
+    bw = measure_copy_bandwidth(rt, nbytes=1 << 20, reps=2)
+    assert bw["GBps"] > 0 and bw["bytes"] == 1 << 20
