@@ -1,0 +1,162 @@
+/* Shallow-water LBM (D2Q9 LABSWE, Zhou 2004): lattice constants, device structs, and the device
+ * functions shared by every lbm_*.cl stage (equilibrium, moments, limiter).
+ *
+ * Units inside the kernels: lattice units for space and time (dx = dt = 1, so velocities are
+ * fractions of the lattice speed e), metres for depth h and bed z. Hence g enters as
+ * G = g / e^2 (1/m) and a population f_a is a depth in metres.
+ *
+ * Directions (Zhou's numbering): 0 rest; odd a are the axes, even a the diagonals, counter-
+ * clockwise from +x: 1 (1,0) 2 (1,1) 3 (0,1) 4 (-1,1) 5 (-1,0) 6 (-1,-1) 7 (0,-1) 8 (1,-1).
+ * Populations are stored structure-of-arrays: f[a * n_cells + j * nx + i].
+ */
+#ifndef LBWATER_LBM_H
+#define LBWATER_LBM_H
+
+#include "common.h"
+
+/* Wall kinds; equal to lbm.Boundary. */
+#define LBM_SLIP 0
+#define LBM_NOSLIP 1
+
+/* Guard actions, equal to lbm.solver.GuardAction. */
+#define LBM_GUARD_NONE 0
+#define LBM_GUARD_SAVE 1
+#define LBM_GUARD_RESTORE 2
+
+/* Save requests of lbm_reduce_final: none, if the interval was clean, always. */
+#define LBM_SAVE_NO 0
+#define LBM_SAVE_IF_CLEAN 1
+#define LBM_SAVE_FORCE 2
+
+/* After a restore the guard raises tau to 0.5 + max(2 (tau - 0.5), LBM_TAU_RAISE_MIN), at most
+ * LBM_TAU_RAISE_MAX; each clean check then moves it back towards tau_user by LBM_TAU_DECAY. */
+#define LBM_TAU_RAISE_MIN 0.05f
+#define LBM_TAU_RAISE_MAX 1.0f
+#define LBM_TAU_DECAY 0.98f
+
+/* Work-group size of the two-stage reduction (a power of two). */
+#define LBM_REDUCE_WG 256
+
+/* f0_eq >= 0 <=> 5Gh/6 + 2U^2/3 <= 1; the limiter keeps that sum below this. */
+#define LBM_F0_LIMIT 0.98f
+
+/* 40 bytes: the constants of one solver, passed by value to every lbm kernel. */
+typedef struct {
+    int nx, ny;       /* cells along x (i) and y (j) */
+    int n_cells;      /* nx * ny: the stride between direction planes of f */
+    float dx;         /* cell size, m */
+    float e;          /* lattice speed dx/dt, m/s */
+    float g_lat;      /* G = g / e^2, 1/m */
+    float drag;       /* linear drag times dt: the momentum fraction removed per step */
+    float h_min;      /* limiter: depth floor, m */
+    float u2_max;     /* limiter: largest (|u|/e)^2 */
+    float fr2_max;    /* limiter: largest Froude number squared */
+} LbmParams;
+
+/* 80 bytes: the guard's device-side record (one per solver). The step kernels read tau and
+ * count clamps; the reduction fills the statistics and decides the action; the host reads the
+ * whole record once per frame. Counters are cumulative. */
+typedef struct {
+    float tau;             /* effective relaxation time (>= tau_user; raised after a restore) */
+    float tau_user;        /* relaxation time from the viscosity */
+    float mass;            /* sum of h over cells at the last check, m (x dx^2 = volume) */
+    float max_u2;          /* max (|u|/e)^2 at the last check */
+    float max_fr2;         /* max Froude^2 at the last check */
+    float min_h;           /* min depth at the last check, m */
+    float ckpt_mass;       /* the same four statistics of the checkpoint */
+    float ckpt_max_u2;
+    float ckpt_max_fr2;
+    float ckpt_min_h;
+    uint nan_cells;        /* non-finite cells found at the last check (before any restore) */
+    uint action;           /* LBM_GUARD_*: what lbm_guard_apply does next */
+    uint clamped;          /* cells clamped by the limiter or a source */
+    uint clamped_checked;  /* value of clamped at the last check */
+    uint restored;         /* checkpoint restores */
+    uint damped;           /* tau raises */
+    uint saved;            /* checkpoints saved */
+    uint checks;           /* checks run */
+    uint pad0, pad1;
+} LbmGuard;
+
+/* 32 bytes: one work-group's partial reduction. */
+typedef struct {
+    float mass, max_u2, max_fr2, min_h;
+    uint nan_cells;
+    uint pad0, pad1, pad2;
+} LbmPartial;
+
+/* 32 bytes: a drop or a push, applied over the cell box [i0, i0+w) x [j0, j0+h) (the launch). */
+typedef struct {
+    float x, y;         /* drop centre or drag start, m */
+    float dx, dy;       /* drag vector, m (push only) */
+    float radius;       /* m */
+    float amount;       /* drop: height, m; push: velocity change at the centre line, m/s */
+    int i0, j0;         /* first cell of the launch box */
+} LbmSource;
+
+/* Weights w_a of the LABSWE equilibrium: 1/3 on the axes, 1/12 on the diagonals. */
+#define LBM_W_AXIS (1.0f / 3.0f)
+#define LBM_W_DIAG (1.0f / 12.0f)
+
+/* Equilibrium of Zhou (2004) in lattice units (U = u/e), written with the weights:
+ *   f0 = h - 5Gh^2/6 - 2hU.U/3
+ *   fa = w_a (G h^2/2 + h c.U + 3/2 h (c.U)^2 - 1/2 h U.U),  a = 1..8                      */
+void lbm_equilibrium(const float h, const float ux, const float uy, const float G,
+                     float* feq)
+{
+    const float u2 = ux * ux + uy * uy;
+    const float base = 0.5f * G * h * h - 0.5f * h * u2;
+    const float a = ux + uy, b = uy - ux;  /* c.U of directions 2 and 4 */
+    feq[0] = h - (5.0f / 6.0f) * G * h * h - (2.0f / 3.0f) * h * u2;
+    feq[1] = LBM_W_AXIS * (base + h * ux + 1.5f * h * ux * ux);
+    feq[5] = LBM_W_AXIS * (base - h * ux + 1.5f * h * ux * ux);
+    feq[3] = LBM_W_AXIS * (base + h * uy + 1.5f * h * uy * uy);
+    feq[7] = LBM_W_AXIS * (base - h * uy + 1.5f * h * uy * uy);
+    feq[2] = LBM_W_DIAG * (base + h * a + 1.5f * h * a * a);
+    feq[6] = LBM_W_DIAG * (base - h * a + 1.5f * h * a * a);
+    feq[4] = LBM_W_DIAG * (base + h * b + 1.5f * h * b * b);
+    feq[8] = LBM_W_DIAG * (base - h * b + 1.5f * h * b * b);
+}
+
+/* Depth and momentum (lattice units) of nine populations. */
+void lbm_moments(const float* f, float* h, float* mx, float* my)
+{
+    *h = f[0] + f[1] + f[2] + f[3] + f[4] + f[5] + f[6] + f[7] + f[8];
+    *mx = (f[1] - f[5]) + (f[2] - f[4]) + (f[8] - f[6]);
+    *my = (f[3] - f[7]) + (f[2] - f[8]) + (f[4] - f[6]);
+}
+
+/* The limiter: depth at least h_min; |U|^2 at most min(u2_max, fr2_max G h); then
+ * 5Gh/6 + 2U^2/3 <= LBM_F0_LIMIT (so f0_eq >= 0) by lowering h. Returns 1 when it changed
+ * anything. NaN passes through unchanged (the guard restores a checkpoint for that). */
+int lbm_limit(float* h, float* ux, float* uy, const LbmParams p)
+{
+    int hit = 0;
+    float hh = *h, vx = *ux, vy = *uy;
+    if (hh < p.h_min) {
+        hh = p.h_min;
+        hit = 1;
+    }
+    float u2 = vx * vx + vy * vy;
+    const float lim = fmin(p.u2_max, p.fr2_max * p.g_lat * hh);
+    if (u2 > lim) {
+        const float s = sqrt(lim / u2);
+        vx *= s;
+        vy *= s;
+        u2 = vx * vx + vy * vy;
+        hit = 1;
+    }
+    if ((5.0f / 6.0f) * p.g_lat * hh + (2.0f / 3.0f) * u2 > LBM_F0_LIMIT) {
+        hh = (6.0f / 5.0f) * (LBM_F0_LIMIT - (2.0f / 3.0f) * u2) / p.g_lat;
+        hit = 1;
+    }
+    *h = hh;
+    *ux = vx;
+    *uy = vy;
+    return hit;
+}
+
+/* Index of cell (i, j). */
+#define LBM_CELL(p, i, j) ((j) * (p).nx + (i))
+
+#endif

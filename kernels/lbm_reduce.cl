@@ -1,0 +1,136 @@
+/* The guard's device reduction: total depth (mass), max (|u|/e)^2, max Froude^2, min depth and
+ * the count of non-finite cells, in two stages (no float atomics): lbm_reduce_partial (many
+ * work-groups of LBM_REDUCE_WG, grid-stride over the cells) then lbm_reduce_final (one work-group)
+ * which also decides the guard's action (lbm_guard.cl applies it).
+ */
+#include "lbm.h"
+
+typedef struct {
+    float mass, max_u2, max_fr2, min_h;
+    uint nan_cells;
+} LbmAcc;
+
+void lbm_acc_merge(LbmAcc* a, const LbmAcc b)
+{
+    a->mass += b.mass;
+    a->max_u2 = fmax(a->max_u2, b.max_u2);
+    a->max_fr2 = fmax(a->max_fr2, b.max_fr2);
+    a->min_h = fmin(a->min_h, b.min_h);
+    a->nan_cells += b.nan_cells;
+}
+
+/* Tree reduction of one work-group's accumulators; the result is valid in work-item 0. */
+LbmAcc lbm_acc_reduce_local(LbmAcc acc, __local float* l_mass, __local float* l_u2,
+                            __local float* l_fr2, __local float* l_h, __local uint* l_nan)
+{
+    const int lid = get_local_id(0);
+    l_mass[lid] = acc.mass;
+    l_u2[lid] = acc.max_u2;
+    l_fr2[lid] = acc.max_fr2;
+    l_h[lid] = acc.min_h;
+    l_nan[lid] = acc.nan_cells;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int s = LBM_REDUCE_WG / 2; s > 0; s >>= 1) {
+        if (lid < s) {
+            l_mass[lid] += l_mass[lid + s];
+            l_u2[lid] = fmax(l_u2[lid], l_u2[lid + s]);
+            l_fr2[lid] = fmax(l_fr2[lid], l_fr2[lid + s]);
+            l_h[lid] = fmin(l_h[lid], l_h[lid + s]);
+            l_nan[lid] += l_nan[lid + s];
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    LbmAcc out = {l_mass[0], l_u2[0], l_fr2[0], l_h[0], l_nan[0]};
+    return out;
+}
+
+__kernel __attribute__((reqd_work_group_size(LBM_REDUCE_WG, 1, 1)))
+void lbm_reduce_partial(__global const float* restrict f, const LbmParams p,
+                        __global LbmPartial* partials)
+{
+    __local float l_mass[LBM_REDUCE_WG], l_u2[LBM_REDUCE_WG], l_fr2[LBM_REDUCE_WG],
+        l_h[LBM_REDUCE_WG];
+    __local uint l_nan[LBM_REDUCE_WG];
+    LbmAcc acc = {0.0f, 0.0f, 0.0f, INFINITY, 0u};
+    for (int n = get_global_id(0); n < p.n_cells; n += get_global_size(0)) {
+        float fl[9], h, mx, my;
+        for (int a = 0; a < 9; ++a) fl[a] = f[a * p.n_cells + n];
+        lbm_moments(fl, &h, &mx, &my);
+        if (!(isfinite(h) && isfinite(mx) && isfinite(my))) {
+            acc.nan_cells += 1u;
+            continue;
+        }
+        acc.mass += h;
+        acc.min_h = fmin(acc.min_h, h);
+        if (h > 0.0f) {
+            const float u2 = (mx * mx + my * my) / (h * h);
+            acc.max_u2 = fmax(acc.max_u2, u2);
+            acc.max_fr2 = fmax(acc.max_fr2, u2 / (p.g_lat * h));
+        }
+    }
+    acc = lbm_acc_reduce_local(acc, l_mass, l_u2, l_fr2, l_h, l_nan);
+    if (get_local_id(0) == 0) {
+        __global LbmPartial* out = partials + get_group_id(0);
+        out->mass = acc.mass;
+        out->max_u2 = acc.max_u2;
+        out->max_fr2 = acc.max_fr2;
+        out->min_h = acc.min_h;
+        out->nan_cells = acc.nan_cells;
+    }
+}
+
+/* Reduce the partials into the guard record and decide: non-finite cells -> restore the
+ * checkpoint and raise tau; else save a checkpoint when asked (save: LBM_SAVE_*) and the interval
+ * since the last check was clean (no clamps), and move tau back towards tau_user. */
+__kernel __attribute__((reqd_work_group_size(LBM_REDUCE_WG, 1, 1)))
+void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
+                      __global LbmGuard* g, const int save)
+{
+    __local float l_mass[LBM_REDUCE_WG], l_u2[LBM_REDUCE_WG], l_fr2[LBM_REDUCE_WG],
+        l_h[LBM_REDUCE_WG];
+    __local uint l_nan[LBM_REDUCE_WG];
+    LbmAcc acc = {0.0f, 0.0f, 0.0f, INFINITY, 0u};
+    for (int k = get_local_id(0); k < n_partials; k += LBM_REDUCE_WG) {
+        const LbmAcc b = {partials[k].mass, partials[k].max_u2, partials[k].max_fr2,
+                          partials[k].min_h, partials[k].nan_cells};
+        lbm_acc_merge(&acc, b);
+    }
+    acc = lbm_acc_reduce_local(acc, l_mass, l_u2, l_fr2, l_h, l_nan);
+    if (get_local_id(0) != 0) return;
+
+    g->checks += 1u;
+    g->nan_cells = acc.nan_cells;
+    const int clean = acc.nan_cells == 0u && g->clamped == g->clamped_checked;
+    g->clamped_checked = g->clamped;
+    if (acc.nan_cells > 0u) {
+        g->action = LBM_GUARD_RESTORE;
+        g->restored += 1u;
+        const float raised = fmin(LBM_TAU_RAISE_MAX,
+                                  0.5f + fmax(2.0f * (g->tau - 0.5f), LBM_TAU_RAISE_MIN));
+        if (raised > g->tau) {
+            g->tau = raised;
+            g->damped += 1u;
+        }
+        /* the state is now the checkpoint's */
+        g->mass = g->ckpt_mass;
+        g->max_u2 = g->ckpt_max_u2;
+        g->max_fr2 = g->ckpt_max_fr2;
+        g->min_h = g->ckpt_min_h;
+        return;
+    }
+    g->mass = acc.mass;
+    g->max_u2 = acc.max_u2;
+    g->max_fr2 = acc.max_fr2;
+    g->min_h = acc.min_h;
+    if (clean) g->tau = g->tau_user + (g->tau - g->tau_user) * LBM_TAU_DECAY;
+    if (save == LBM_SAVE_FORCE || (save == LBM_SAVE_IF_CLEAN && clean)) {
+        g->action = LBM_GUARD_SAVE;
+        g->saved += 1u;
+        g->ckpt_mass = acc.mass;
+        g->ckpt_max_u2 = acc.max_u2;
+        g->ckpt_max_fr2 = acc.max_fr2;
+        g->ckpt_min_h = acc.min_h;
+    } else {
+        g->action = LBM_GUARD_NONE;
+    }
+}

@@ -1,0 +1,132 @@
+/* One LABSWE time step, fused: pull-stream (with walls and the well-balanced bed force), moments,
+ * limiter, BGK collision with drag. Two buffers: reads f_src (post-collision populations of the
+ * last step at their origin cells), writes f_dst. Launch: 2D over (nx, ny).
+ *
+ * Defines: LBM_BOUNDARY (LBM_SLIP | LBM_NOSLIP), LBM_BED (0: flat bed, the bed force and the depth
+ * buffers are skipped; 1: uneven bed).
+ *
+ * Memory per cell and step: 9 float loads + 9 float stores (72 B); with LBM_BED also the depth
+ * at t and the bed (8 B, neighbours come from cache) and the new depth (4 B): 84 B.
+ */
+#include "lbm.h"
+
+#ifndef LBM_BOUNDARY
+#define LBM_BOUNDARY LBM_SLIP
+#endif
+#ifndef LBM_BED
+#define LBM_BED 1
+#endif
+
+/* Population a arriving at (i, j): pulled from the upwind cell (i - cx, j - cy). Where that cell
+ * lies outside, a wall sends it back: slip mirrors the crossing component (mx: direction with cx
+ * negated, my: cy negated), noslip reverses it (opp). The bed force of the link, split with the
+ * equilibrium weight w, makes a lake at rest an exact fixed point (REFERENCES.md sec. 1):
+ *   F_a = -w_a G (h(x) + h(src)) / 2 (z(x) - z(src)),  zero for bounce-back (src = x). */
+float lbm_pull(__global const float* restrict f, __global const float* restrict h_src,
+               __global const float* restrict bed, const LbmParams p, const int i, const int j,
+               const int a, const int cx, const int cy, const int mx, const int my,
+               const int opp, const float w, const float h_here, const float z_here)
+{
+    int si = i - cx, sj = j - cy, m = a;
+    const int out_x = si < 0 || si >= p.nx;
+    const int out_y = sj < 0 || sj >= p.ny;
+#if LBM_BOUNDARY == LBM_NOSLIP
+    if (out_x || out_y) {
+        si = i;
+        sj = j;
+        m = opp;
+    }
+#else
+    if (out_x && out_y) {
+        si = i;
+        sj = j;
+        m = opp;
+    } else if (out_x) {
+        si = i;
+        m = mx;
+    } else if (out_y) {
+        sj = j;
+        m = my;
+    }
+#endif
+    const int s = LBM_CELL(p, si, sj);
+    float fa = f[m * p.n_cells + s];
+#if LBM_BED
+    fa -= w * p.g_lat * 0.5f * (h_here + h_src[s]) * (z_here - bed[s]);
+#else
+    (void)h_src;
+    (void)bed;
+    (void)w;
+    (void)h_here;
+    (void)z_here;
+#endif
+    return fa;
+}
+
+/* Collision of nine streamed populations in place; returns the depth after the limiter and adds 1
+ * to *clamped when the limiter acted (the cell is then set to its equilibrium, a local damping). */
+float lbm_collide(float* f, const LbmParams p, const float omega, int* clamped)
+{
+    float h, mx, my;
+    lbm_moments(f, &h, &mx, &my);
+    float ux = mx / h, uy = my / h;
+    float feq[9];
+    if (lbm_limit(&h, &ux, &uy, p)) {
+        *clamped = 1;
+        lbm_equilibrium(h, ux, uy, p.g_lat, feq);
+        for (int a = 0; a < 9; ++a) f[a] = feq[a];
+        return h;
+    }
+    lbm_equilibrium(h, ux, uy, p.g_lat, feq);
+    /* Linear drag: momentum change dM = -drag * (mx, my), split as w_a c_a.dM (sum = dM). */
+    const float dmx = -p.drag * mx, dmy = -p.drag * my;
+    f[0] += omega * (feq[0] - f[0]);
+    f[1] += omega * (feq[1] - f[1]) + LBM_W_AXIS * dmx;
+    f[5] += omega * (feq[5] - f[5]) - LBM_W_AXIS * dmx;
+    f[3] += omega * (feq[3] - f[3]) + LBM_W_AXIS * dmy;
+    f[7] += omega * (feq[7] - f[7]) - LBM_W_AXIS * dmy;
+    f[2] += omega * (feq[2] - f[2]) + LBM_W_DIAG * (dmx + dmy);
+    f[6] += omega * (feq[6] - f[6]) - LBM_W_DIAG * (dmx + dmy);
+    f[4] += omega * (feq[4] - f[4]) + LBM_W_DIAG * (dmy - dmx);
+    f[8] += omega * (feq[8] - f[8]) - LBM_W_DIAG * (dmy - dmx);
+    return h;
+}
+
+__kernel void lbm_step(__global const float* restrict f_src, __global float* restrict f_dst,
+                       __global const float* restrict h_src, __global float* restrict h_dst,
+                       __global const float* restrict bed, const LbmParams p,
+                       __global LbmGuard* guard)
+{
+    const int i = get_global_id(0), j = get_global_id(1);
+    if (i >= p.nx || j >= p.ny) return;
+    const int n = LBM_CELL(p, i, j);
+#if LBM_BED
+    const float h_here = h_src[n], z_here = bed[n];
+#else
+    const float h_here = 0.0f, z_here = 0.0f;
+#endif
+    const float wa = LBM_W_AXIS, wd = LBM_W_DIAG;
+    float f[9];
+    /*                                           a  cx  cy mx my opp w */
+    f[0] = f_src[n];
+    f[1] = lbm_pull(f_src, h_src, bed, p, i, j, 1, 1, 0, 5, 1, 5, wa, h_here, z_here);
+    f[2] = lbm_pull(f_src, h_src, bed, p, i, j, 2, 1, 1, 4, 8, 6, wd, h_here, z_here);
+    f[3] = lbm_pull(f_src, h_src, bed, p, i, j, 3, 0, 1, 3, 7, 7, wa, h_here, z_here);
+    f[4] = lbm_pull(f_src, h_src, bed, p, i, j, 4, -1, 1, 2, 6, 8, wd, h_here, z_here);
+    f[5] = lbm_pull(f_src, h_src, bed, p, i, j, 5, -1, 0, 1, 5, 1, wa, h_here, z_here);
+    f[6] = lbm_pull(f_src, h_src, bed, p, i, j, 6, -1, -1, 8, 4, 2, wd, h_here, z_here);
+    f[7] = lbm_pull(f_src, h_src, bed, p, i, j, 7, 0, -1, 7, 3, 3, wa, h_here, z_here);
+    f[8] = lbm_pull(f_src, h_src, bed, p, i, j, 8, 1, -1, 6, 2, 4, wd, h_here, z_here);
+
+    int clamped = 0;
+    const float h = lbm_collide(f, p, 1.0f / guard->tau, &clamped);
+    if (clamped) atomic_inc(&guard->clamped);
+
+    for (int a = 0; a < 9; ++a) f_dst[a * p.n_cells + n] = f[a];
+#if LBM_BED
+    h_dst[n] = h;
+#else
+    (void)h;
+    (void)h_dst;
+#endif
+}

@@ -1,0 +1,530 @@
+"""The shallow-water LBM solver on an OpenCL device (D2Q9 LABSWE, Zhou 2004, float32).
+
+Host side of ``kernels/lbm_*.cl``. One :class:`ShallowWater` owns its device buffers (two
+population buffers that ping-pong, the depth buffers the bed force reads, the bed, a checkpoint
+and the guard record) and one kernel object per launch, looked up once. A frame is
+
+    sim.step(k)          # k x lbm_step (+ rain drops), then one guard check; no host sync
+    sim.write_surface(vertex_buf, normal_buf)   # two launches into the caller's buffers
+    sim.stats()          # reads the 80-byte guard record: the only host traffic of a frame
+
+See docs/lbm.md for units, the choice of e, dt and tau, the streaming scheme and the guard.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+import pyopencl as cl
+
+from kernels import Runtime, get_runtime
+from lbm.lattice import Lattice, Options, choose_lattice, equilibrium
+from lbm.structs import GUARD_DTYPE, PARAMS_DTYPE, PARTIAL_DTYPE, SOURCE_DTYPE, record
+
+
+class Boundary(IntEnum):
+    """Walls of the closed box; values equal LBM_SLIP / LBM_NOSLIP in kernels/lbm.h."""
+
+    SLIP = 0     # specular reflection: free slip along the wall
+    NOSLIP = 1   # bounce-back: no slip
+
+    @classmethod
+    def from_str(cls, name) -> Boundary:
+        if isinstance(name, cls):
+            return name
+        valid = ", ".join(m.name.lower() for m in cls)
+        if not isinstance(name, str) or name.strip().upper() not in cls.__members__:
+            raise ValueError(f"unknown boundary {name!r}; valid: {valid}")
+        return cls[name.strip().upper()]
+
+
+class GuardAction(IntEnum):
+    """LBM_GUARD_* in kernels/lbm.h."""
+
+    NONE = 0
+    SAVE = 1
+    RESTORE = 2
+
+
+class SaveRequest(IntEnum):
+    """LBM_SAVE_* in kernels/lbm.h: what a guard check may do with the checkpoint."""
+
+    NO = 0
+    IF_CLEAN = 1
+    FORCE = 2
+
+
+@dataclass
+class PingPong:
+    """Two buffers of one field: ``current`` holds the state, ``other`` receives the next."""
+
+    current: cl.Buffer
+    other: cl.Buffer
+
+    def swap(self) -> None:
+        self.current, self.other = self.other, self.current
+
+
+@dataclass
+class _Rain:
+    rate: float      # drops per second
+    radius: float    # m
+    height: float    # m
+    rng: np.random.Generator
+    next_time: float  # s, when the next drop falls
+
+
+def _finite(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise ValueError(f"{name}={value!r} must be a number")
+    x = float(value)
+    if not math.isfinite(x):
+        raise ValueError(f"{name}={value!r} must be finite")
+    return x
+
+
+class ShallowWater:
+    """Shallow water in a closed box of ``nx`` x ``ny`` square cells of ``dx`` metres.
+
+    The bed is flat at 0 and the water a lake at rest of depth ``options['depth']`` (1 m) until
+    :meth:`set_state`. ``boundary``: ``"slip"`` (specular walls, the default) or ``"noslip"``
+    (bounce-back). ``device``: None (default device), a device spec string, or a
+    :class:`kernels.Runtime`. Options (SI units) are those of :class:`lbm.lattice.Options`.
+    Grid x (index i) is world x, grid y (index j) is world z; arrays are indexed [j, i].
+    """
+
+    def __init__(self, nx: int, ny: int, dx: float, boundary: str = "slip", device=None,
+                 **options):
+        for name, v in (("nx", nx), ("ny", ny)):
+            if isinstance(v, bool) or not isinstance(v, int | np.integer) or not 3 <= v <= 65536:
+                raise ValueError(f"{name}={v!r} must be an integer in [3, 65536]")
+        self.nx, self.ny = int(nx), int(ny)
+        self.dx = _finite("dx", dx)
+        if self.dx <= 0:
+            raise ValueError(f"dx={dx!r} must be > 0 (cell size in metres)")
+        self.boundary = Boundary.from_str(boundary)
+        self.options = Options.from_kwargs(**options)
+        self.rt: Runtime = device if isinstance(device, Runtime) else get_runtime(device)
+        n = self.n_cells = self.nx * self.ny
+        if 9 * 4 * n > self.rt.device.max_mem_alloc_size:
+            raise ValueError(f"grid {nx}x{ny} needs {36 * n / 2**20:.0f} MiB per population "
+                             f"buffer; the device allows {self.rt.device.max_mem_alloc_size >> 20}"
+                             " MiB per buffer")
+
+        # -- device buffers, allocated once -------------------------------------------------
+        fb, hb = 9 * 4 * n, 4 * n
+        self._f = PingPong(self.rt.buffer(fb), self.rt.buffer(fb))
+        self._h = PingPong(self.rt.buffer(hb), self.rt.buffer(hb))
+        self._bed = self.rt.buffer(hb)
+        self._f_ckpt = self.rt.buffer(fb)
+        self._h_ckpt = self.rt.buffer(hb)
+        self._guard = self.rt.buffer(GUARD_DTYPE.itemsize)
+        self._n_partials = int(min(1024, -(-n // 256)))
+        self._partials = self.rt.buffer(self._n_partials * PARTIAL_DTYPE.itemsize)
+        self._eta = None      # surface scratch, on first write_surface
+        self._field_bufs = None  # h, u, v for fields(), on first call
+
+        # -- kernels, looked up once --------------------------------------------------------
+        self._k_steps: dict[bool, tuple[cl.Kernel, cl.Kernel]] = {}
+        self._k_drop = self._kernel("lbm_sources.cl", "lbm_drop")
+        self._k_push = self._kernel("lbm_sources.cl", "lbm_push")
+        self._k_partial = self._kernel("lbm_reduce.cl", "lbm_reduce_partial")
+        self._k_final = self._kernel("lbm_reduce.cl", "lbm_reduce_final")
+        self._k_apply = self._kernel("lbm_guard.cl", "lbm_guard_apply")
+        self._k_height = self._kernel("lbm_surface.cl", "lbm_surface_height")
+        self._k_mesh = self._kernel("lbm_surface.cl", "lbm_surface_mesh")
+        self._k_fields = self._kernel("lbm_fields.cl", "lbm_fields")
+
+        self._guard_host = np.zeros(1, GUARD_DTYPE)
+        self._guard_evt: cl.Event | None = None
+        self._reported = np.zeros(1, GUARD_DTYPE)  # counters at the last stats() call
+        self._rain: _Rain | None = None
+        self._rain_seed = None
+        self.time = 0.0
+        self.steps = 0
+        d = self.options.depth
+        self.set_state(np.full((self.ny, self.nx), d))
+
+    # -- construction helpers ---------------------------------------------------------------
+    def _kernel(self, source: str, name: str, defines: dict | None = None) -> cl.Kernel:
+        return cl.Kernel(self.rt.program(source, defines), name)
+
+    def _step_kernels(self, uneven: bool) -> tuple[cl.Kernel, cl.Kernel]:
+        """The fused step for the current walls and bed kind, bound for both parities."""
+        pair = self._k_steps.get(uneven)
+        if pair is None:
+            defines = {"LBM_BOUNDARY": int(self.boundary), "LBM_BED": int(uneven)}
+            pair = (self._kernel("lbm_step.cl", "lbm_step", defines),
+                    self._kernel("lbm_step.cl", "lbm_step", defines))
+            self._k_steps[uneven] = pair
+        return pair
+
+    def _bind_steps(self) -> None:
+        """Bind both parities once: parity 0 reads f.current, parity 1 reads f.other."""
+        a, b = self._step_kernels(self._uneven)
+        f, h = self._f, self._h
+        for k, (fs, fd, hs, hd) in ((a, (f.current, f.other, h.current, h.other)),
+                                    (b, (f.other, f.current, h.other, h.current))):
+            k.set_args(fs, fd, hs, hd, self._bed, self._params, self._guard)
+        self._k_step_pair = (a, b)
+
+    # -- public properties ------------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Time step in seconds (dx / e)."""
+        return self.lattice.dt
+
+    @property
+    def e(self) -> float:
+        """Lattice speed dx/dt in m/s."""
+        return self.lattice.e
+
+    @property
+    def tau(self) -> float:
+        """BGK relaxation time from the viscosity (the guard may run with a larger one)."""
+        return self.lattice.tau
+
+    @property
+    def size(self) -> tuple[float, float]:
+        """Extent of the box in metres (x, y)."""
+        return self.nx * self.dx, self.ny * self.dx
+
+    # -- state ------------------------------------------------------------------------------
+    def _field(self, name: str, a, default: float) -> np.ndarray:
+        shape = (self.ny, self.nx)
+        if a is None:
+            return np.full(shape, default)
+        a = np.asarray(a)
+        if a.shape != shape:
+            raise ValueError(f"set_state: {name} has shape {a.shape}; expected (ny, nx) = {shape}")
+        if not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a):
+            raise ValueError(f"set_state: {name} must be real numbers, got dtype {a.dtype}")
+        a = a.astype(np.float64)
+        if not np.all(np.isfinite(a)):
+            bad = np.argwhere(~np.isfinite(a))[0]
+            raise ValueError(f"set_state: {name} is not finite at [j, i] = {tuple(bad)}")
+        return a
+
+    def set_state(self, h, u=None, v=None, bed=None) -> None:
+        """Replace the water: depth ``h`` (m, > 0), velocity ``u``, ``v`` (m/s, default 0) and bed
+        ``bed`` (m, default flat 0), all (ny, nx) arrays. Populations start at equilibrium.
+
+        Chooses the lattice (e, dt, tau) for this state, so ``dt`` may change; resets ``time``
+        to 0, the guard record and its checkpoint; keeps rain settings (restarted from the seed).
+        """
+        h = self._field("h", h, 0.0)
+        u = self._field("u", u, 0.0)
+        v = self._field("v", v, 0.0)
+        bed = self._field("bed", bed, 0.0)
+        if np.any(h <= 0):
+            j, i = np.argwhere(h <= 0)[0]
+            raise ValueError(f"set_state: depth h[{j}, {i}] = {h[j, i]:g} m is not positive; "
+                             "dry cells are not supported (negative depth is invalid)")
+        speed = np.hypot(u, v)
+        lat = choose_lattice(self.dx, float(h.max()), float(speed.max()), self.options)
+        if h.min() < lat.min_depth:
+            j, i = np.unravel_index(np.argmin(h), h.shape)
+            raise ValueError(f"set_state: depth h[{j}, {i}] = {h[j, i]:g} m is below min_depth="
+                             f"{lat.min_depth:g} m (nearly dry cells are not supported)")
+        froude = speed / np.sqrt(lat.gravity * h)
+        if froude.max() > lat.max_froude:
+            j, i = np.unravel_index(np.argmax(froude), h.shape)
+            raise ValueError(f"set_state: Froude number {froude[j, i]:.3g} at [j, i] = ({j}, {i})"
+                             f" exceeds max_froude={lat.max_froude:g} (supercritical flow is not"
+                             " supported by D2Q9 LABSWE)")
+        self.lattice: Lattice = lat
+        self._uneven = bool(np.ptp(bed) > 0)
+        self._params = record(
+            PARAMS_DTYPE, nx=self.nx, ny=self.ny, n_cells=self.n_cells, dx=self.dx, e=lat.e,
+            g_lat=lat.g_lat, drag=lat.drag * lat.dt, h_min=lat.min_depth,
+            u2_max=lat.max_speed_ratio**2, fr2_max=lat.max_froude**2)
+        feq = equilibrium(h, u / lat.e, v / lat.e, lat.g_lat).astype(np.float32)
+        q = self.rt.queue
+        cl.enqueue_copy(q, self._f.current, feq)
+        h32 = h.astype(np.float32)
+        cl.enqueue_copy(q, self._h.current, h32)
+        cl.enqueue_copy(q, self._bed, bed.astype(np.float32))
+        self._bed_host = bed.astype(np.float32)
+        g = np.zeros(1, GUARD_DTYPE)
+        g["tau"] = g["tau_user"] = lat.tau
+        cl.enqueue_copy(q, self._guard, g)
+        self._reported = g.copy()
+        self._bind_steps()
+        self.time = 0.0
+        self.steps = 0
+        self._since_check = 0
+        self._since_save = 0
+        self._parity = 0
+        if self._rain_seed is not None:
+            self._start_rain(self._rain.rate, self._rain.radius, self._rain.height,
+                             self._rain_seed)
+        self._check(SaveRequest.FORCE)   # the first checkpoint, and the first statistics
+
+    # -- stepping ---------------------------------------------------------------------------
+    def _local_size(self):
+        if self.options.local_size is not None:
+            return tuple(self.options.local_size)
+        return (128, 1) if self.rt.is_gpu else None
+
+    def _enqueue_step(self) -> None:
+        k = self._k_step_pair[self._parity]
+        self.rt.launch("lbm.step", k, (self.nx, self.ny), self._local_size())
+        self._f.swap()
+        self._h.swap()
+        self._parity ^= 1
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` time steps (``n * dt`` seconds): n fused collide+stream launches, the
+        rain drops due, a guard check every ``guard_interval`` steps and one at the end. Only
+        enqueues: no host sync, no host copy."""
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 0:
+            raise ValueError(f"step: n={n!r} must be an integer >= 0")
+        if n == 0:
+            return
+        interval = self.options.guard_interval
+        for _ in range(int(n)):
+            if self._rain is not None:
+                self._rain_due(self.time + self.dt)
+            self._enqueue_step()
+            self.time += self.dt
+            self.steps += 1
+            self._since_check += 1
+            self._since_save += 1
+            if self._since_check >= interval:
+                self._check_due()
+        if self._since_check > 0:
+            self._check_due()
+
+    def _check_due(self) -> None:
+        save = SaveRequest.NO
+        if self._since_save >= self.options.checkpoint_interval:
+            save = SaveRequest.IF_CLEAN
+            self._since_save = 0
+        self._check(save)
+
+    def _check(self, save: SaveRequest) -> None:
+        """Guard check, all on the device: reduce, decide (restore / save / nothing), apply;
+        then start a non-blocking read of the 80-byte guard record."""
+        rt, p = self.rt, self._params
+        self._k_partial.set_args(self._f.current, p, self._partials)
+        rt.launch("lbm.guard", self._k_partial, self._n_partials * 256, 256)
+        self._k_final.set_args(self._partials, np.int32(self._n_partials), self._guard,
+                               np.int32(save))
+        rt.launch("lbm.guard", self._k_final, 256, 256)
+        self._k_apply.set_args(self._f.current, self._h.current, self._f_ckpt, self._h_ckpt, p,
+                               self._guard)
+        rt.launch("lbm.guard", self._k_apply, self.n_cells, 256 if rt.is_gpu else None)
+        self._guard_evt = cl.enqueue_copy(rt.queue, self._guard_host, self._guard,
+                                          is_blocking=False)
+        self._since_check = 0
+        self._dirty = False
+
+    # -- sources ----------------------------------------------------------------------------
+    def _box(self, x0: float, x1: float, y0: float, y1: float):
+        """Cells whose centres may lie in [x0, x1] x [y0, y1]: (i0, j0, w, h), or None."""
+        i0 = max(0, math.floor(x0 / self.dx - 0.5))
+        i1 = min(self.nx - 1, math.ceil(x1 / self.dx - 0.5))
+        j0 = max(0, math.floor(y0 / self.dx - 0.5))
+        j1 = min(self.ny - 1, math.ceil(y1 / self.dx - 0.5))
+        if i1 < i0 or j1 < j0:
+            return None
+        return i0, j0, i1 - i0 + 1, j1 - j0 + 1
+
+    def _launch_source(self, stage: str, kernel: cl.Kernel, box, **fields) -> None:
+        i0, j0, w, h = box
+        src = record(SOURCE_DTYPE, i0=i0, j0=j0, **fields)
+        kernel.set_args(self._f.current, self._h.current, self._params, src, self._guard)
+        self.rt.launch(stage, kernel, (w, h))
+        self._dirty = True
+
+    def _check_radius(self, what: str, radius) -> float:
+        r = _finite(f"{what}: radius", radius)
+        if r < 0.5 * self.dx:
+            raise ValueError(f"{what}: radius={radius!r} m is below half a cell "
+                             f"(dx/2 = {0.5 * self.dx:g} m) and would touch no cell centre")
+        return r
+
+    def _check_point(self, what: str, x, y) -> tuple[float, float]:
+        x, y = _finite(f"{what}: x", x), _finite(f"{what}: y", y)
+        lx, ly = self.size
+        if not (0 <= x <= lx and 0 <= y <= ly):
+            raise ValueError(f"{what}: point ({x:g}, {y:g}) m is outside the box "
+                             f"[0, {lx:g}] x [0, {ly:g}] m")
+        return x, y
+
+    def add_drop(self, x: float, y: float, radius: float, height: float) -> None:
+        """Add a smooth bump of water: height * (1 + cos(pi r/radius)) / 2 within ``radius`` m of
+        (x, y) m, at constant velocity (negative height: a dip). Where the result would break
+        the limits (min_depth, f0_eq >= 0) it is clipped and counted as clamped."""
+        x, y = self._check_point("add_drop", x, y)
+        r = self._check_radius("add_drop", radius)
+        amount = _finite("add_drop: height", height)
+        box = self._box(x - r, x + r, y - r, y + r)
+        if box is not None:
+            self._launch_source("lbm.sources", self._k_drop, box, x=x, y=y, dx=0.0, dy=0.0,
+                                radius=r, amount=amount)
+
+    def push(self, x: float, y: float, dx: float, dy: float, strength: float,
+             radius: float | None = None) -> None:
+        """Momentum along a drag from (x, y) to (x + dx, y + dy) (m): cells within ``radius``
+        (m; default 4 cells) of that segment gain ``strength`` m/s along it, weighted
+        (1 - (d/radius)^2)^2. A zero-length drag has no direction and does nothing. Velocities
+        beyond the limiter's limits (max_speed_ratio, max_froude) are clamped and counted."""
+        x, y = self._check_point("push", x, y)
+        ddx, ddy = _finite("push: dx", dx), _finite("push: dy", dy)
+        s = _finite("push: strength", strength)
+        r = self._check_radius("push", 4.0 * self.dx if radius is None else radius)
+        if ddx == 0.0 and ddy == 0.0:
+            return
+        box = self._box(min(x, x + ddx) - r, max(x, x + ddx) + r,
+                        min(y, y + ddy) - r, max(y, y + ddy) + r)
+        if box is not None:
+            self._launch_source("lbm.sources", self._k_push, box, x=x, y=y, dx=ddx, dy=ddy,
+                                radius=r, amount=s)
+
+    def set_rain(self, rate: float, radius: float, height: float, seed: int = 0) -> None:
+        """Rain: drops of ``radius`` m and ``height`` m falling at ``rate`` per second (a Poisson
+        process), uniformly over the box, from a NumPy generator seeded with ``seed``: the same
+        seed gives the same drops at the same times. ``rate`` 0 stops the rain."""
+        rate = _finite("set_rain: rate", rate)
+        if rate < 0:
+            raise ValueError(f"set_rain: rate={rate:g} must be >= 0 (drops per second)")
+        r = self._check_radius("set_rain", radius)
+        height = _finite("set_rain: height", height)
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise ValueError(f"set_rain: seed={seed!r} must be an integer >= 0")
+        if rate == 0:
+            self._rain = None
+            self._rain_seed = None
+            return
+        self._start_rain(rate, r, height, int(seed))
+
+    def _start_rain(self, rate, radius, height, seed) -> None:
+        rng = np.random.default_rng(seed)
+        self._rain = _Rain(rate, radius, height, rng, self.time + rng.exponential(1.0 / rate))
+        self._rain_seed = seed
+
+    def _rain_due(self, t_end: float) -> None:
+        """Drops whose time falls before ``t_end`` (drawn from the seeded generator)."""
+        rain, (lx, ly) = self._rain, self.size
+        while rain.next_time < t_end:
+            x, y = rain.rng.uniform(0.0, lx), rain.rng.uniform(0.0, ly)
+            self.add_drop(x, y, rain.radius, rain.height)
+            rain.next_time += rain.rng.exponential(1.0 / rain.rate)
+
+    # -- output -----------------------------------------------------------------------------
+    def write_surface(self, vertices_buf: cl.Buffer, normals_buf: cl.Buffer | None = None,
+                      origin=(0.0, 0.0, 0.0)) -> cl.Event:
+        """Write the surface mesh into the caller's device buffers (nx*ny float4 each): vertex
+        (i, j) at index j*nx + i, position (ox + (i+1/2) dx, oy + bed + h, oz + (j+1/2) dx, 0)
+        in metres with Y up; unit normals from central differences of bed + h. No host copy.
+        Triangles: :func:`lbm.grid_triangles`. Returns the event of the last launch."""
+        need = 16 * self.n_cells
+        for name, buf in (("vertices_buf", vertices_buf), ("normals_buf", normals_buf)):
+            if buf is None and name == "normals_buf":
+                continue
+            if not isinstance(buf, cl.Buffer):
+                raise ValueError(f"write_surface: {name} must be a pyopencl Buffer, "
+                                 f"got {type(buf).__name__}")
+            if buf.size < need:
+                raise ValueError(f"write_surface: {name} holds {buf.size} bytes; needs "
+                                 f"{need} (nx*ny = {self.n_cells} float4)")
+        try:
+            o = np.array([float(c) for c in origin], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"write_surface: origin={origin!r} must be three numbers") from None
+        if o.shape != (3,) or not np.all(np.isfinite(o)):
+            raise ValueError(f"write_surface: origin={origin!r} must be three finite numbers")
+        if self._eta is None:
+            self._eta = self.rt.buffer(4 * self.n_cells)
+        rt = self.rt
+        self._k_height.set_args(self._f.current, self._bed, self._params, self._eta)
+        rt.launch("lbm.surface", self._k_height, self.n_cells, 256 if rt.is_gpu else None)
+        origin4 = np.array([o[0], o[1], o[2], 0.0], np.float32).view(cl.cltypes.float4)[0]
+        self._k_mesh.set_args(self._eta, self._params, origin4, vertices_buf,
+                              normals_buf if normals_buf is not None else vertices_buf,
+                              np.int32(normals_buf is not None))
+        return rt.launch("lbm.surface", self._k_mesh, (self.nx, self.ny),
+                         (64, 1) if rt.is_gpu else None)
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """Depth ``h`` (m), velocity ``u``, ``v`` (m/s) and ``bed`` (m) as float32 (ny, nx)
+        arrays. A host copy of whole fields: for tests, saving and analysis, not per frame."""
+        if self._dirty:
+            self._check(SaveRequest.NO)
+        if self._field_bufs is None:
+            self._field_bufs = [self.rt.buffer(4 * self.n_cells) for _ in range(3)]
+        hb, ub, vb = self._field_bufs
+        self._k_fields.set_args(self._f.current, self._params, hb, ub, vb)
+        self.rt.launch("lbm.fields", self._k_fields, self.n_cells, 256 if self.rt.is_gpu else None)
+        shape = (self.ny, self.nx)
+        out = {name: self.rt.to_host(b, np.float32, self.n_cells).reshape(shape)
+               for name, b in (("h", hb), ("u", ub), ("v", vb))}
+        out["bed"] = self._bed_host.copy()
+        bad = [k for k, a in out.items() if not np.all(np.isfinite(a))]
+        if bad:  # the guard restores before any read; reaching this is a solver bug
+            raise RuntimeError(f"internal error: non-finite {bad} after the guard check")
+        return out
+
+    def _load_populations(self, f: np.ndarray) -> None:
+        """Overwrite the stored populations (9, ny, nx) and the depth buffer (their sum) as they
+        are, NaN included: for kernel tests. The next check sees whatever was loaded."""
+        f = np.ascontiguousarray(f, np.float32).reshape(9, self.ny, self.nx)
+        cl.enqueue_copy(self.rt.queue, self._f.current, f)
+        cl.enqueue_copy(self.rt.queue, self._h.current,
+                        f.astype(np.float64).sum(0).astype(np.float32))
+        self._dirty = True
+
+    def populations(self) -> np.ndarray:
+        """The stored post-collision populations (9, ny, nx) float32 (tests and debugging)."""
+        return self.rt.to_host(self._f.current, np.float32, 9 * self.n_cells).reshape(
+            9, self.ny, self.nx)
+
+    # -- the guard --------------------------------------------------------------------------
+    def guard_record(self) -> np.void:
+        """The device guard record as of the last check (waits for that check only)."""
+        if self._dirty:
+            self._check(SaveRequest.NO)
+        self._guard_evt.wait()
+        return self._guard_host[0].copy()
+
+    def stats(self) -> dict:
+        """Statistics of the current state and what the guard did since the last call.
+
+        ``mass`` (m^3 of water), ``max_speed_ratio`` (max |u|/e), ``max_froude``, ``min_depth``
+        (m), ``nan`` (a non-finite value was found since the last call; it was replaced by the
+        checkpoint), and the counts since the last call: ``clamped`` (cells the limiter or a
+        source clipped), ``restored`` (checkpoint restores), ``damped`` (tau raises), ``saved``
+        (checkpoints); ``tau`` (the relaxation time in use), ``time``, ``steps`` and ``report``,
+        one line saying what happened.
+        """
+        g = self.guard_record()
+        prev, self._reported = self._reported, np.array([g], GUARD_DTYPE)
+        delta = {k: int(g[k]) - int(prev[0][k]) for k in ("clamped", "restored", "damped",
+                                                          "saved")}
+        out = {
+            "time": self.time,
+            "steps": self.steps,
+            "mass": float(g["mass"]) * self.dx**2,
+            "max_speed_ratio": math.sqrt(max(float(g["max_u2"]), 0.0)),
+            "max_froude": math.sqrt(max(float(g["max_fr2"]), 0.0)),
+            "min_depth": float(g["min_h"]),
+            "nan": delta["restored"] > 0,   # every non-finite state found is restored
+            "tau": float(g["tau"]),
+            **delta,
+        }
+        parts = []
+        if delta["restored"]:
+            parts.append(f"non-finite values: restored the checkpoint {delta['restored']}x")
+        if delta["damped"]:
+            parts.append(f"damped: tau raised to {out['tau']:.4g} (viscosity tau "
+                         f"{self.lattice.tau:.4g})")
+        if delta["clamped"]:
+            parts.append(f"clamped {delta['clamped']} cell updates to the limits (|u|/e <= "
+                         f"{self.lattice.max_speed_ratio:g}, Fr <= {self.lattice.max_froude:g},"
+                         f" h >= {self.lattice.min_depth:g} m, f0_eq >= 0)")
+        out["report"] = "; ".join(parts) if parts else "ok"
+        return out
