@@ -1,0 +1,30 @@
+/* Renderer stage 1: primary rays of one chunk of pixels, in tile (or row) order, spp per pixel.
+ * Ray i covers pixel q = q0 + i / spp, sample i % spp; padding pixels outside the image get a
+ * dead ray (zero direction and weight) so the wavefront stays sorted by q. */
+#include "common.h"
+#include "render_optics.h"
+
+inline Ray primary_ray(__constant const Camera* cam, uint q, uint s)
+{
+    uint x, y;
+    Ray r = {cam->origin.x, cam->origin.y, cam->origin.z, q, 0.0f, 0.0f, 0.0f, RENDER_NO_MEDIUM,
+             0.0f, 0.0f, 0.0f, s};
+    if (!pixel_of(cam, q, &x, &y)) return r;
+    const float2 off = sample_offset(cam, y * cam->width + x, s);
+    const float sx = 2.0f * (((float)x + off.x) / (float)cam->width) - 1.0f;
+    const float sy = 1.0f - 2.0f * (((float)y + off.y) / (float)cam->height);
+    const float3 d = normalize(cam->forward.xyz + sx * cam->right.xyz + sy * cam->up.xyz);
+    const float w = 1.0f / (float)cam->spp;
+    r.dx = d.x; r.dy = d.y; r.dz = d.z;
+    r.wr = w; r.wg = w; r.wb = w;
+    return r;
+}
+
+__kernel void render_raygen(__constant const Camera* cam, const uint q0, const uint n_rays,
+                            __global Ray* rays, __global uint* counts)
+{
+    const uint i = get_global_id(0);
+    if (i == 0) counts[0] = n_rays;
+    if (i >= n_rays) return;
+    rays[i] = primary_ray(cam, q0 + i / cam->spp, i % cam->spp);
+}

@@ -1,0 +1,155 @@
+/* Renderer: what a hit looks like (position, normals, uv, material, colour) and the Whitted
+ * rules shared by the shade, shadow and secondary stages, so each stage derives the same
+ * answer from (ray, hit) without storing a surface record per ray. */
+#ifndef LBWATER_RENDER_SURFACE_H
+#define LBWATER_RENDER_SURFACE_H
+
+#include "render_optics.h"
+#include "scene.h"
+
+/* The renderer's shading data, in this order (raytrace.render_scene.RenderScene.shade_args()):
+ * instances, meshes, positions (float4, input order), normals (float4), uvs (float2),
+ * triangles (uint x3, input order), per-triangle material ids, materials, textures, texels. */
+#define RENDER_GEOM_PARAMS                                                                     \
+    __global const InstanceInfo* restrict g_inst, __global const MeshInfo* restrict g_mesh,   \
+    __global const float4* restrict g_pos, __global const float4* restrict g_nrm,             \
+    __global const float2* restrict g_uv, __global const uint* restrict g_tri,                \
+    __global const ushort* restrict g_tri_mat, __global const Material* restrict g_mat,       \
+    __global const TexInfo* restrict g_tex, __global const float4* restrict g_texels
+
+#define RENDER_GEOM_ARGS g_inst, g_mesh, g_pos, g_nrm, g_uv, g_tri, g_tri_mat, g_mat, g_tex, g_texels
+
+typedef struct {
+    float3 p;       /* world position from the barycentrics */
+    float3 ng;      /* unit geometric normal (winding side) */
+    float3 ns;      /* unit shading normal, on the side of ng */
+    float3 kd;      /* diffuse colour, texture applied */
+    int material;
+} Surface;
+
+inline float3 xform_point(const float4* m, float3 p)
+{
+    return (float3)(dot(m[0].xyz, p) + m[0].w, dot(m[1].xyz, p) + m[1].w,
+                    dot(m[2].xyz, p) + m[2].w);
+}
+
+inline float3 xform_vector(const float4* m, float3 v)
+{
+    return (float3)(dot(m[0].xyz, v), dot(m[1].xyz, v), dot(m[2].xyz, v));
+}
+
+inline Surface surface_at(RENDER_GEOM_PARAMS, int inst, int prim, float u, float v)
+{
+    Surface s;
+    const InstanceInfo in = g_inst[inst];
+    const MeshInfo m = g_mesh[in.mesh];
+    const uint t = m.tri_offset + (uint)prim;
+    const uint i0 = m.vert_offset + g_tri[3 * t];
+    const uint i1 = m.vert_offset + g_tri[3 * t + 1];
+    const uint i2 = m.vert_offset + g_tri[3 * t + 2];
+    const float3 p0 = g_pos[i0].xyz, p1 = g_pos[i1].xyz, p2 = g_pos[i2].xyz;
+    const float w = 1.0f - u - v;
+    s.p = xform_point(in.world_from_object, w * p0 + u * p1 + v * p2);
+    s.ng = normalize(xform_vector(in.normal_from_object, cross(p1 - p0, p2 - p0)));
+    s.ns = s.ng;
+    if (m.flags & MESH_HAS_NORMALS) {
+        const float3 n = w * g_nrm[i0].xyz + u * g_nrm[i1].xyz + v * g_nrm[i2].xyz;
+        const float len2 = dot(n, n);
+        if (len2 > 1e-20f) {
+            const float3 ns = normalize(xform_vector(in.normal_from_object, n));
+            s.ns = dot(ns, s.ng) >= 0.0f ? ns : -ns;
+        }
+    }
+    s.material = in.material >= 0 ? in.material
+               : ((m.flags & MESH_TRI_MATERIALS) ? (int)g_tri_mat[t] : m.material);
+    const Material mat = g_mat[s.material];
+    s.kd = mat.diffuse.xyz;
+    if (mat.texture >= 0 && (m.flags & MESH_HAS_UVS)) {
+        const float2 uv = w * g_uv[i0] + u * g_uv[i1] + v * g_uv[i2];
+        const float2 scaled = uv * (float2)(mat.uv_scale_u, mat.uv_scale_v);
+        s.kd *= tex_bilinear(g_texels, g_tex[mat.texture], scaled, true).xyz;
+    }
+    return s;
+}
+
+inline bool is_dielectric(const Material* m) { return m->absorption.w > 0.0f; }
+
+inline float max3(float3 a) { return fmax(a.x, fmax(a.y, a.z)); }
+
+inline float3 ray_weight(const Ray* r) { return (float3)(r->wr, r->wg, r->wb); }
+inline float3 ray_dir(const Ray* r) { return (float3)(r->dx, r->dy, r->dz); }
+inline float3 ray_org(const Ray* r) { return (float3)(r->ox, r->oy, r->oz); }
+
+/* The ray's weight at its hit, after Beer-Lambert absorption along a path inside a medium. */
+inline float3 attenuated_weight(const Ray* r, float t, __global const Material* g_mat)
+{
+    float3 w = ray_weight(r);
+    if (r->medium >= 0) w *= beer(g_mat[r->medium].absorption.xyz, t);
+    return w;
+}
+
+/* Normals facing the side the ray came from; the shading normal falls back to the geometric one
+ * when it faces away from the ray (interpolated normals on a silhouette). */
+inline void facing_normals(const Surface* s, float3 d, float3* nf_g, float3* nf_s)
+{
+    const bool front = dot(d, s->ng) < 0.0f;
+    *nf_g = front ? s->ng : -s->ng;
+    *nf_s = front ? s->ns : -s->ns;
+    if (dot(*nf_s, d) >= 0.0f) *nf_s = *nf_g;
+}
+
+/* Fraction of the (attenuated) weight lit directly: 1 for dielectrics, 1 - reflectivity else. */
+inline float direct_fraction(const Material* m)
+{
+    return is_dielectric(m) ? 1.0f : 1.0f - m->reflectivity;
+}
+
+/* Whitted children of a hit: reflection (mirror or Fresnel) and refraction; at most two.
+ * Returns the number written to out[0..]; children below min_weight or past max_depth are cut. */
+inline int spawn_children(const Ray* r, const Surface* s, float3 w, uint depth,
+                          __constant const RenderParams* prm, __global const Material* g_mat,
+                          Ray* out)
+{
+    if (depth >= prm->max_depth) return 0;
+    const Material m = g_mat[s->material];
+    const float3 d = ray_dir(r);
+    float3 nf_g, nf_s;
+    facing_normals(s, d, &nf_g, &nf_s);
+    float3 w_refl = (float3)(0.0f), w_refr = (float3)(0.0f);
+    float3 t_dir = (float3)(0.0f);
+    int refr_medium = RENDER_NO_MEDIUM;
+    if (is_dielectric(&m)) {
+        const bool entering = dot(d, s->ng) < 0.0f;
+        const float eta = entering ? 1.0f / m.absorption.w : m.absorption.w;
+        float3 n_use = nf_s;
+        bool ok = refract_dir(d, n_use, eta, &t_dir);
+        if (ok && dot(t_dir, nf_g) >= 0.0f) {   /* bent to the wrong side: use the true face */
+            n_use = nf_g;
+            ok = refract_dir(d, n_use, eta, &t_dir);
+        }
+        const float F = ok ? fresnel(prm->fresnel, -dot(d, n_use), eta) : 1.0f;
+        w_refl = w * F;
+        w_refr = ok ? w * (1.0f - F) : (float3)(0.0f);
+        refr_medium = entering ? s->material : RENDER_NO_MEDIUM;
+    } else {
+        w_refl = w * m.reflectivity;
+    }
+    int n = 0;
+    if (max3(w_refl) >= prm->min_weight) {
+        float3 rd = reflect_dir(d, nf_s);
+        if (dot(rd, nf_g) <= 0.0f) rd = reflect_dir(d, nf_g);
+        const float3 o = offset_ray(s->p, nf_g);
+        Ray c = {o.x, o.y, o.z, r->pixel, rd.x, rd.y, rd.z, r->medium,
+                 w_refl.x, w_refl.y, w_refl.z, r->sample};
+        out[n++] = c;
+    }
+    if (max3(w_refr) >= prm->min_weight) {
+        const float3 o = offset_ray(s->p, -nf_g);
+        Ray c = {o.x, o.y, o.z, r->pixel, t_dir.x, t_dir.y, t_dir.z, refr_medium,
+                 w_refr.x, w_refr.y, w_refr.z, r->sample};
+        out[n++] = c;
+    }
+    return n;
+}
+
+#endif

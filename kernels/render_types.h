@@ -1,0 +1,133 @@
+/* Wavefront renderer: device structs and enums. Each struct has one NumPy mirror in
+ * raytrace/render_types.py whose layout a test proves with kernels/layout.check_struct. */
+#ifndef LBWATER_RENDER_TYPES_H
+#define LBWATER_RENDER_TYPES_H
+
+#define RENDER_MAX_LIGHTS 8
+#define RENDER_NO_MEDIUM (-1)
+#define RENDER_DEAD_PIXEL 0xffffffffu
+/* Tiles of 8x8 pixels, Morton order inside a tile. */
+#define RENDER_TILE_BITS 3
+#define RENDER_TILE 8
+/* Scan: work-group size and elements per work-item (one block = 1024 counts). */
+#define RENDER_SCAN_WG 256
+#define RENDER_SCAN_PER_ITEM 4
+#define RENDER_SCAN_BLOCK (RENDER_SCAN_WG * RENDER_SCAN_PER_ITEM)
+/* Shadow rays cross at most this many transmissive (dielectric) surfaces; more means dark. */
+#define RENDER_MAX_SHADOW_CROSSINGS 4
+
+/* enum SamplePattern */
+#define SAMPLE_CENTER 0
+#define SAMPLE_RGSS 1
+#define SAMPLE_JITTERED 2
+/* enum PixelOrder */
+#define ORDER_ROWS 0
+#define ORDER_TILES 1
+/* enum FresnelMode */
+#define FRESNEL_EXACT 0
+#define FRESNEL_SCHLICK 1
+/* enum LightKind */
+#define LIGHT_DIRECTIONAL 0
+#define LIGHT_SPOT 1
+/* enum SkyKind */
+#define SKY_PROCEDURAL 0
+#define SKY_CUBEMAP 1
+/* enum Tonemap */
+#define TONEMAP_CLAMP 0
+#define TONEMAP_REINHARD 1
+#define TONEMAP_ACES 2
+/* MeshInfo.flags */
+#define MESH_HAS_NORMALS 1u
+#define MESH_HAS_UVS 2u
+#define MESH_TRI_MATERIALS 4u
+/* Depth limit and the stats buffer: stats[d] = rays traced at depth d over the frame,
+ * stats[RENDER_STAT_DROPPED] = children dropped because the wavefront was full. */
+#define RENDER_MAX_DEPTH 32
+#define RENDER_STAT_DROPPED (RENDER_MAX_DEPTH + 1)
+#define RENDER_STATS_LEN (RENDER_MAX_DEPTH + 2)
+
+/* 48 bytes: three float4 rows. One wavefront entry. */
+typedef struct {
+    float ox, oy, oz;   /* origin (m), already offset off the surface it left */
+    uint pixel;         /* tile-order pixel id q; rays stay sorted by it */
+    float dx, dy, dz;   /* unit direction; all zero for a dead (padding) ray */
+    int medium;         /* material id of the dielectric the ray travels in, -1: air */
+    float wr, wg, wb;   /* contribution weight per channel, <= 1 */
+    uint sample;        /* primary sample index within its pixel (for AOVs) */
+} Ray;
+
+/* 96 bytes. Pinhole camera; basis vectors already scaled by the image-plane extent. */
+typedef struct {
+    float4 origin;      /* xyz eye (m) */
+    float4 right;       /* xyz: right * tan(fov/2) * aspect */
+    float4 up;          /* xyz: up * tan(fov/2) */
+    float4 forward;     /* xyz: unit view direction */
+    uint width, height, spp, pattern;
+    uint order, tiles_x, jitter_cols, seed;
+} Camera;
+
+/* 64 bytes. */
+typedef struct {
+    float4 diffuse;     /* rgb linear albedo; w unused */
+    float4 specular;    /* rgb Phong specular colour; w shininess exponent */
+    float4 absorption;  /* rgb Beer-Lambert coefficient inside (1/m); w: IOR, 0 for opaque */
+    float reflectivity; /* opaque: fraction reflected as a mirror, 0..1 */
+    int texture;        /* index into TexInfo table, -1: none */
+    float uv_scale_u, uv_scale_v;
+} Material;
+
+/* 64 bytes. */
+typedef struct {
+    float4 position;    /* xyz spot position (m) */
+    float4 direction;   /* xyz unit direction the light travels */
+    float4 color;       /* rgb radiance scale: irradiance (directional), intensity (spot) */
+    int kind;           /* LIGHT_DIRECTIONAL or LIGHT_SPOT */
+    float cos_inner, cos_outer; /* spot cone: full inside inner, smooth to zero at outer */
+    float pad;
+} Light;
+
+/* 16 bytes. A texture in the texel pool (float4 linear RGBA, row-major, row 0 = v 0). */
+typedef struct {
+    uint offset, width, height, pad;
+} TexInfo;
+
+/* 16 bytes. A mesh's range in the concatenated geometry arrays. */
+typedef struct {
+    uint vert_offset, tri_offset;
+    int material;       /* default material id */
+    uint flags;         /* MESH_* */
+} MeshInfo;
+
+/* 112 bytes. An instance's transforms (rows of 3x4 matrices) and what it draws. */
+typedef struct {
+    float4 world_from_object[3];
+    float4 normal_from_object[3]; /* inverse transpose of the linear part, rows */
+    uint mesh;
+    int material;       /* overrides the mesh's materials when >= 0 */
+    uint pad0, pad1;
+} InstanceInfo;
+
+/* 160 bytes. Per-frame shading settings. */
+typedef struct {
+    float4 ambient;     /* rgb ambient light */
+    float4 sky_zenith;  /* rgb */
+    float4 sky_horizon; /* rgb */
+    float4 sky_ground;  /* rgb */
+    float4 sun_dir;     /* xyz unit direction towards the sun; w: cos of the sun's radius */
+    float4 sun_color;   /* rgb sun disk radiance; w: glow strength */
+    float4 exposure;    /* x exposure multiplier */
+    uint n_lights, fresnel, sky, cubemap_tex;
+    uint transmissive_shadows, tonemap, max_depth, capacity;
+    float min_weight, pad0, pad1, pad2;
+} RenderParams;
+
+/* 32 bytes. Primary-hit outputs per pixel (sample 0 of the pixel). */
+typedef struct {
+    float4 normal;      /* xyz world shading normal facing the camera, 0 on a miss */
+    float depth;        /* distance along the unit camera ray (m), inf on a miss */
+    int prim;           /* triangle index within its mesh, -1 on a miss */
+    int inst;           /* instance id, -1 on a miss */
+    int material;
+} Aov;
+
+#endif

@@ -1,0 +1,390 @@
+"""What the renderer draws: a :class:`raytrace.scene.Scene` (the BVHs) plus everything shading
+needs, in device tables bound to ``RENDER_GEOM_PARAMS`` (kernels/render_surface.h).
+
+Mesh and instance ids are those of the underlying Scene. Static meshes are copied to the device
+once; a dynamic mesh given as device buffers (the water surface written by the LBM solver) is
+copied device-to-device into the shading arrays by every :meth:`RenderScene.update`, next to
+its BLAS refit, so nothing crosses to the host during a frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pyopencl as cl
+
+from kernels.runtime import Runtime
+from raytrace.render_types import (
+    INSTANCEINFO,
+    LIGHT,
+    MATERIAL,
+    MAX_LIGHTS,
+    MESH_HAS_NORMALS,
+    MESH_HAS_UVS,
+    MESH_TRI_MATERIALS,
+    MESHINFO,
+    TEXINFO,
+    LightKind,
+    SkyKind,
+)
+from raytrace.scene import Scene
+
+
+@dataclasses.dataclass(frozen=True)
+class Material:
+    """Whitted material. ``ior`` 0 means opaque; > 0 a dielectric (refracts, Fresnel)."""
+
+    diffuse: tuple = (0.8, 0.8, 0.8)     #: linear albedo
+    specular: tuple = (0.0, 0.0, 0.0)    #: Phong specular colour
+    shininess: float = 32.0              #: Phong exponent
+    reflectivity: float = 0.0            #: opaque: mirror fraction 0..1
+    ior: float = 0.0                     #: index of refraction (0: opaque)
+    absorption: tuple = (0.0, 0.0, 0.0)  #: Beer-Lambert coefficient inside (1/m)
+    texture: int = -1                    #: texture id multiplying diffuse, -1 for none
+    uv_scale: tuple = (1.0, 1.0)         #: texture repeats per unit of uv
+
+    def record(self) -> np.ndarray:
+        for name in ("diffuse", "specular", "absorption"):
+            v = getattr(self, name)
+            if len(v) != 3 or not all(math.isfinite(x) and x >= 0 for x in v):
+                raise ValueError(f"material {name} must be 3 finite numbers >= 0, got {v}")
+        if not 0.0 <= self.reflectivity <= 1.0:
+            raise ValueError(f"material reflectivity must lie in [0, 1], got {self.reflectivity}")
+        if self.ior != 0.0 and not 1.0 <= self.ior <= 4.0:
+            raise ValueError(f"material ior must be 0 (opaque) or in [1, 4], got {self.ior}")
+        if not 0.0 <= self.shininess <= 1e4:
+            raise ValueError(f"material shininess must lie in [0, 1e4], got {self.shininess}")
+        r = np.zeros(1, MATERIAL)[0]
+        r["diffuse"][:3] = self.diffuse
+        r["specular"][:3] = self.specular
+        r["specular"][3] = self.shininess
+        r["absorption"][:3] = self.absorption
+        r["absorption"][3] = self.ior
+        r["reflectivity"] = self.reflectivity
+        r["texture"] = self.texture
+        r["uv_scale_u"], r["uv_scale_v"] = self.uv_scale
+        return r
+
+
+@dataclasses.dataclass(frozen=True)
+class Sky:
+    """Procedural sky (gradient, sun disk and glow) or a six-face cubemap."""
+
+    kind: SkyKind = SkyKind.PROCEDURAL
+    zenith: tuple = (0.25, 0.45, 0.85)
+    horizon: tuple = (0.75, 0.85, 0.95)
+    ground: tuple = (0.35, 0.33, 0.3)
+    sun_direction: tuple = (0.4, 0.8, 0.45)  #: towards the sun
+    sun_color: tuple = (30.0, 28.0, 24.0)    #: sun disk radiance
+    sun_radius: float = 0.6                  #: angular radius (deg)
+    sun_glow: float = 0.02                   #: glow strength relative to the disk
+    cubemap: int = -1                        #: first of six texture ids (+x -x +y -y +z -z)
+
+
+def _vec3(v, what: str) -> np.ndarray:
+    a = np.asarray(v, np.float64).reshape(-1)
+    if a.shape != (3,) or not np.isfinite(a).all():
+        raise ValueError(f"{what} must be 3 finite numbers, got {v}")
+    return a
+
+
+def _unit(v, what: str) -> np.ndarray:
+    a = _vec3(v, what)
+    n = np.linalg.norm(a)
+    if n == 0:
+        raise ValueError(f"{what} must not be zero")
+    return a / n
+
+
+class RenderScene:
+    """Meshes with shading attributes, instances, materials, textures, lights and sky."""
+
+    def __init__(self, rt: Runtime, **scene_kw):
+        self.rt = rt
+        self.scene = Scene(rt, **scene_kw)
+        self.materials: list[Material] = []
+        self.textures: list[np.ndarray] = []
+        self.lights = np.zeros(0, LIGHT)
+        self.sky = Sky()
+        self.ambient = (0.05, 0.05, 0.05)
+        self.meshes: list[dict] = []
+        self.instances = np.zeros(0, INSTANCEINFO)
+        self._layout_meshes = -1
+        self._dirty = {"materials", "textures", "lights", "instances"}
+
+    # -- content ---------------------------------------------------------------------------
+    def add_material(self, material: Material) -> int:
+        material.record()  # validates
+        if material.texture >= len(self.textures):
+            raise ValueError(f"material texture {material.texture} does not exist "
+                             f"({len(self.textures)} textures)")
+        self.materials.append(material)
+        self._dirty.add("materials")
+        return len(self.materials) - 1
+
+    def add_texture(self, image) -> int:
+        """A linear-colour image (h, w, 3|4) floats; row 0 is v = 0 (bottom). Returns its id."""
+        a = np.asarray(image, np.float32)
+        if a.ndim != 3 or a.shape[2] not in (3, 4) or a.shape[0] < 1 or a.shape[1] < 1:
+            raise ValueError(f"texture must have shape (h, w, 3 or 4), got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError("texture has non-finite texels")
+        t = np.ones(a.shape[:2] + (4,), np.float32)
+        t[..., : a.shape[2]] = a
+        self.textures.append(t)
+        self._dirty.add("textures")
+        return len(self.textures) - 1
+
+    def add_mesh(self, vertices, triangles, *, normals=None, uvs=None, material: int = 0,
+                 tri_materials=None, dynamic: bool = False, n_vertices: int | None = None,
+                 n_triangles: int | None = None) -> int:
+        """Add a mesh (see :meth:`Scene.add_mesh`); returns its mesh id.
+
+        ``normals``: (n,3) per-vertex normals, or a device buffer of float4 for a dynamic mesh
+        given as device buffers; ``uvs``: (n,2); ``material``: its material id;
+        ``tri_materials``: (m,) per-triangle material ids overriding ``material``.
+        """
+        on_device = isinstance(vertices, cl.Buffer)
+        tris_host = None
+        if on_device:
+            if n_vertices is None:
+                raise ValueError("a mesh given as device buffers needs n_vertices=")
+            if not isinstance(triangles, cl.Buffer):
+                tris_host = np.ascontiguousarray(triangles, np.uint32).reshape(-1, 3)
+                n_triangles = len(tris_host)
+                triangles = self.rt.to_device(tris_host)
+            if n_triangles is None:
+                raise ValueError("device triangles need n_triangles=")
+            nv, nt = int(n_vertices), int(n_triangles)
+            mesh_id = self.scene.add_mesh(vertices, triangles, dynamic=dynamic,
+                                          n_vertices=nv, n_triangles=nt)
+            v_host = None
+        else:
+            mesh_id = self.scene.add_mesh(vertices, triangles, dynamic=dynamic)
+            rec = self.scene.mesh_record(mesh_id)
+            nv, nt = rec.n_vertices, rec.n_triangles
+            v_host = np.asarray(vertices, np.float32).reshape(-1, 3)
+            tris_host = np.ascontiguousarray(triangles, np.uint32).reshape(-1, 3)
+        flags = 0
+        n_host = None
+        if normals is not None:
+            flags |= MESH_HAS_NORMALS
+            if not isinstance(normals, cl.Buffer):
+                n_host = np.asarray(normals, np.float32).reshape(-1, 3)
+                if len(n_host) != nv or not np.isfinite(n_host).all():
+                    raise ValueError(f"normals must be {nv} finite 3-vectors")
+        uv_host = None
+        if uvs is not None:
+            flags |= MESH_HAS_UVS
+            uv_host = np.asarray(uvs, np.float32).reshape(-1, 2)
+            if len(uv_host) != nv or not np.isfinite(uv_host).all():
+                raise ValueError(f"uvs must be {nv} finite 2-vectors")
+        tm = None
+        if tri_materials is not None:
+            flags |= MESH_TRI_MATERIALS
+            tm = np.asarray(tri_materials).reshape(-1)
+            if len(tm) != nt:
+                raise ValueError(f"tri_materials must have {nt} entries, got {len(tm)}")
+            if len(tm) and (tm.min() < 0 or tm.max() >= len(self.materials)):
+                raise ValueError(f"tri_materials must lie in [0, {len(self.materials) - 1}]")
+            tm = tm.astype(np.uint16)
+        if not 0 <= material < len(self.materials):
+            raise ValueError(f"material {material} does not exist ({len(self.materials)} made)")
+        self.meshes.append({
+            "vertices": v_host, "triangles": tris_host, "normals": n_host, "uvs": uv_host,
+            "tri_materials": tm, "material": int(material), "flags": flags,
+            "n_vertices": nv, "n_triangles": nt, "dynamic": bool(dynamic),
+            "vbuf": vertices if on_device else None, "tbuf": triangles if on_device else None,
+            "nbuf": normals if isinstance(normals, cl.Buffer) else None})
+        return mesh_id
+
+    def add_instance(self, mesh_id: int, world_from_object=None, material: int = -1) -> int:
+        """Place a mesh; ``material`` >= 0 overrides its materials."""
+        if not -1 <= material < len(self.materials):
+            raise ValueError(f"material {material} does not exist ({len(self.materials)} made)")
+        inst = self.scene.add_instance(mesh_id, world_from_object)
+        rec = np.zeros(1, INSTANCEINFO)
+        rec["mesh"], rec["material"] = mesh_id, material
+        self.instances = np.concatenate([self.instances, rec])
+        self._set_rows(inst, np.eye(4) if world_from_object is None else world_from_object)
+        return inst
+
+    def set_transform(self, instance_id: int, world_from_object) -> None:
+        self.scene.set_transform(instance_id, world_from_object)
+        self._set_rows(instance_id, world_from_object)
+
+    def _set_rows(self, inst: int, m) -> None:
+        a = np.asarray(m, np.float64)[:3]
+        rec = self.instances[inst]
+        rec["world_from_object"] = a
+        rec["normal_from_object"][:, :3] = np.linalg.inv(a[:, :3]).T
+        rec["normal_from_object"][:, 3] = 0.0
+        self._dirty.add("instances")
+
+    def add_light(self, kind: LightKind | str, *, direction=(0, -1, 0), color=(1, 1, 1),
+                  position=(0, 0, 0), inner_angle: float = 20.0, outer_angle: float = 30.0
+                  ) -> int:
+        """A directional light (``direction`` it travels, irradiance ``color``) or a spot
+        (``position``, axis ``direction``, intensity ``color`` in W/sr-like units falling off as
+        1/d^2, cone half-angles in degrees). Returns its index."""
+        kind = LightKind.from_str(kind)
+        if len(self.lights) >= MAX_LIGHTS:
+            raise ValueError(f"at most {MAX_LIGHTS} lights")
+        if not 0 <= inner_angle <= outer_angle <= 180:
+            raise ValueError(f"spot angles need 0 <= inner {inner_angle} <= outer {outer_angle}"
+                             " <= 180 degrees")
+        rec = np.zeros(1, LIGHT)
+        rec["kind"] = int(kind)
+        rec["direction"][0, :3] = _unit(direction, "light direction")
+        rec["position"][0, :3] = _vec3(position, "light position")
+        c = _vec3(color, "light color")
+        if (c < 0).any():
+            raise ValueError(f"light color must be >= 0, got {color}")
+        rec["color"][0, :3] = c
+        rec["cos_inner"] = math.cos(math.radians(inner_angle))
+        rec["cos_outer"] = math.cos(math.radians(outer_angle))
+        self.lights = np.concatenate([self.lights, rec])
+        self._dirty.add("lights")
+        return len(self.lights) - 1
+
+    def set_sky(self, sky: Sky) -> None:
+        _unit(sky.sun_direction, "sun direction")
+        if sky.kind == SkyKind.CUBEMAP and not 0 <= sky.cubemap <= len(self.textures) - 6:
+            raise ValueError("a cubemap sky needs six textures starting at sky.cubemap")
+        self.sky = sky
+
+    @property
+    def has_dielectric(self) -> bool:
+        return any(m.ior > 0 for m in self.materials)
+
+    @property
+    def n_triangles(self) -> int:
+        return sum(m["n_triangles"] for m in self.meshes)
+
+    # -- device tables ---------------------------------------------------------------------
+    def _build_layout(self) -> None:
+        rt = self.rt
+        nv = sum(m["n_vertices"] for m in self.meshes)
+        nt = sum(m["n_triangles"] for m in self.meshes)
+        info = np.zeros(len(self.meshes), MESHINFO)
+        pos = np.zeros((max(nv, 1), 4), np.float32)
+        nrm = np.zeros((max(nv, 1), 4), np.float32)
+        uv = np.zeros((max(nv, 1), 2), np.float32)
+        tris = np.zeros((max(nt, 1), 3), np.uint32)
+        tmat = np.zeros(max(nt, 1), np.uint16)
+        vo = to = 0
+        for k, m in enumerate(self.meshes):
+            info[k] = (vo, to, m["material"], m["flags"])
+            n, t = m["n_vertices"], m["n_triangles"]
+            if m["vertices"] is not None:
+                pos[vo:vo + n, :3] = m["vertices"]
+            if m["normals"] is not None:
+                nrm[vo:vo + n, :3] = m["normals"]
+            if m["uvs"] is not None:
+                uv[vo:vo + n] = m["uvs"]
+            if m["triangles"] is not None:
+                tris[to:to + t] = m["triangles"]
+            if m["tri_materials"] is not None:
+                tmat[to:to + t] = m["tri_materials"]
+            m["vert_offset"], m["tri_offset"] = vo, to
+            vo += n
+            to += t
+        self.mesh_info = rt.to_device(info if len(info) else np.zeros(1, MESHINFO))
+        self.positions = rt.to_device(pos)
+        self.normals = rt.to_device(nrm)
+        self.uvs = rt.to_device(uv)
+        self.triangles = rt.to_device(tris)
+        self.tri_materials = rt.to_device(tmat)
+        for m in self.meshes:  # device-only triangles: copied once
+            if m["triangles"] is None:
+                cl.enqueue_copy(rt.queue, self.triangles, m["tbuf"],
+                                dst_offset=12 * m["tri_offset"], byte_count=12 * m["n_triangles"])
+        self._layout_meshes = len(self.meshes)
+
+    def _copy_dynamic(self) -> None:
+        rt = self.rt
+        for m in self.meshes:
+            if m["vbuf"] is None:
+                continue
+            n = 16 * m["n_vertices"]
+            rt.record("render.geometry", cl.enqueue_copy(
+                rt.queue, self.positions, m["vbuf"], dst_offset=16 * m["vert_offset"],
+                byte_count=n))
+            if m["nbuf"] is not None:
+                rt.record("render.geometry", cl.enqueue_copy(
+                    rt.queue, self.normals, m["nbuf"], dst_offset=16 * m["vert_offset"],
+                    byte_count=n))
+
+    def _upload_tables(self) -> None:
+        rt = self.rt
+        if "materials" in self._dirty:
+            recs = np.array([m.record() for m in self.materials] or [Material().record()],
+                            MATERIAL)
+            self.material_buf = rt.to_device(recs)
+        if "textures" in self._dirty:
+            info = np.zeros(max(len(self.textures), 1), TEXINFO)
+            off = 0
+            for k, t in enumerate(self.textures):
+                info[k] = (off, t.shape[1], t.shape[0], 0)
+                off += t.shape[0] * t.shape[1]
+            texels = (np.concatenate([t.reshape(-1, 4) for t in self.textures])
+                      if self.textures else np.zeros((1, 4), np.float32))
+            self.texinfo_buf = rt.to_device(info)
+            self.texel_buf = rt.to_device(texels)
+        if "lights" in self._dirty:
+            self.light_buf = rt.to_device(self.lights if len(self.lights) else np.zeros(1, LIGHT))
+        if "instances" in self._dirty:
+            recs = self.instances if len(self.instances) else np.zeros(1, INSTANCEINFO)
+            if getattr(self, "_inst_n", -1) != len(recs):
+                self.instance_buf = rt.buffer(recs.nbytes)
+                self._inst_n = len(recs)
+            rt.record("render.geometry", cl.enqueue_copy(rt.queue, self.instance_buf, recs.copy(),
+                                                         is_blocking=False))
+        self._dirty.clear()
+
+    def update(self, rebuild: bool = False) -> None:
+        """Bring BVHs and shading tables up to date (enqueued; no host sync)."""
+        if not self.materials:
+            self.add_material(Material())
+        if len(self.meshes) != self._layout_meshes:
+            self._build_layout()
+        self._copy_dynamic()
+        self._upload_tables()
+        self.scene.update(rebuild=rebuild)
+
+    def shade_args(self) -> list:
+        """Buffers for ``RENDER_GEOM_PARAMS`` in order; valid after :meth:`update`."""
+        return [self.instance_buf, self.mesh_info, self.positions, self.normals, self.uvs,
+                self.triangles, self.tri_materials, self.material_buf, self.texinfo_buf,
+                self.texel_buf]
+
+    def tables(self) -> dict:
+        """Host copies for the float64 reference (dynamic meshes are read back: test use only)."""
+        meshes = []
+        for m in self.meshes:
+            d = dict(m)
+            if d["vertices"] is None:
+                d["vertices"] = self.rt.to_host(m["vbuf"], np.float32,
+                                                4 * m["n_vertices"]).reshape(-1, 4)[:, :3]
+            if d["triangles"] is None:
+                d["triangles"] = self.rt.to_host(m["tbuf"], np.uint32,
+                                                 3 * m["n_triangles"]).reshape(-1, 3)
+            if d["nbuf"] is not None:
+                d["normals"] = self.rt.to_host(m["nbuf"], np.float32,
+                                               4 * m["n_vertices"]).reshape(-1, 4)[:, :3]
+            meshes.append(d)
+        return {"meshes": meshes, "instances": self.instances.copy(),
+                "materials": np.array([m.record() for m in self.materials], MATERIAL),
+                "textures": list(self.textures)}
+
+    def bytes_per_triangle(self) -> dict:
+        """Device bytes per triangle: BVH (nodes + leaf triangles) and shading attributes."""
+        from raytrace.bvh import NODE_DTYPE, TRI_DTYPE, node_count
+        nt = max(self.n_triangles, 1)
+        nv = sum(m["n_vertices"] for m in self.meshes)
+        bvh = sum(node_count(m["n_triangles"]) for m in self.meshes) * NODE_DTYPE.itemsize \
+            + self.n_triangles * TRI_DTYPE.itemsize
+        shading = nv * (16 + 16 + 8) + self.n_triangles * (12 + 2)
+        return {"bvh": bvh / nt, "shading": shading / nt, "total": (bvh + shading) / nt}
