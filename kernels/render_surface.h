@@ -135,7 +135,7 @@ inline int spawn_children(const Ray* r, const Surface* s, float3 w, uint depth,
         w_refl = w * m.reflectivity;
     }
     int n = 0;
-    if (max3(w_refl) >= prm->min_weight) {
+    if (max3(w_refl) > 0.0f && max3(w_refl) >= prm->min_weight) {
         float3 rd = reflect_dir(d, nf_s);
         if (dot(rd, nf_g) <= 0.0f) rd = reflect_dir(d, nf_g);
         const float3 o = offset_ray(s->p, nf_g);
@@ -143,7 +143,7 @@ inline int spawn_children(const Ray* r, const Surface* s, float3 w, uint depth,
                  w_refl.x, w_refl.y, w_refl.z, r->sample};
         out[n++] = c;
     }
-    if (max3(w_refr) >= prm->min_weight) {
+    if (max3(w_refr) > 0.0f && max3(w_refr) >= prm->min_weight) {
         const float3 o = offset_ray(s->p, -nf_g);
         Ray c = {o.x, o.y, o.z, r->pixel, t_dir.x, t_dir.y, t_dir.z, refr_medium,
                  w_refr.x, w_refr.y, w_refr.z, r->sample};

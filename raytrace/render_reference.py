@@ -54,8 +54,8 @@ def sample_offsets(cam, pixel_index: np.ndarray, s: np.ndarray) -> np.ndarray:
     rows = int(cam["spp"]) // cols
     s = s.astype(np.uint32)
     pix = pixel_index.astype(np.uint32)
-    key = hash_u32((pix * np.uint32(0x9E3779B9))
-                   ^ hash_u32(s + np.uint32(int(cam["seed"])) * np.uint32(0x85EBCA6B)))
+    seed = np.array([int(cam["seed"])], np.uint32)
+    key = hash_u32((pix * np.uint32(0x9E3779B9)) ^ hash_u32(s + seed * np.uint32(0x85EBCA6B)))
     jx = hash_unit(key)
     jy = hash_unit(key ^ np.uint32(0x68E31DA4))
     return np.stack([((s % cols) + jx) / cols, ((s // cols) + jy) / rows], axis=1)
@@ -378,7 +378,7 @@ def render(tables: dict, cam, prm, lights) -> dict:
                 for wc in (w_refl, w_refr):
                     if abs(wc.max() - min_w) < 1e-6 * max(min_w, 1e-30):
                         fragile[pix[i, 1], pix[i, 0]] = True
-                if w_refl.max() >= min_w:
+                if w_refl.max() > 0 and w_refl.max() >= min_w:
                     rd = reflect(d[i], nfs)
                     if rd @ nfg <= 0:
                         rd = reflect(d[i], nfg)
@@ -387,7 +387,7 @@ def render(tables: dict, cam, prm, lights) -> dict:
                     child_w.append(w_refl)
                     child_m.append(medium[i])
                     child_pix.append((pix[i], samples[i]))
-                if w_refr.max() >= min_w:
+                if w_refr.max() > 0 and w_refr.max() >= min_w:
                     child_o.append(p[k] - EPS * (1 + np.abs(p[k]).max()) * nfg)
                     child_d.append(tdir[0])
                     child_w.append(w_refr)

@@ -146,6 +146,8 @@ class RenderScene:
         given as device buffers; ``uvs``: (n,2); ``material``: its material id;
         ``tri_materials``: (m,) per-triangle material ids overriding ``material``.
         """
+        if not self.materials:  # material 0 is a default grey until one is added
+            self.add_material(Material())
         on_device = isinstance(vertices, cl.Buffer)
         tris_host = None
         if on_device:

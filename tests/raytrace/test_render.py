@@ -1,0 +1,242 @@
+"""The wavefront renderer against independent references: the float64 NumPy pipeline, Snell and
+the Fresnel equations in float64, raytrace.intersect for primary hits, analytic lighting."""
+
+import numpy as np
+import pytest
+
+from raytrace import render_reference as ref
+from raytrace.render import Renderer, RenderSettings, jitter_cols
+from raytrace.render_scene import Material, RenderScene
+from raytrace.render_types import RAY
+
+IOR = 1.333
+
+
+def box(lo, hi):
+    """Closed box, outward winding."""
+    V = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                  for z in (lo[2], hi[2])], np.float32)
+    F = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    return V, F
+
+
+def quad(center, size, up=True):
+    cx, cy, cz = center
+    h = size / 2
+    V = np.array([[cx - h, cy, cz - h], [cx + h, cy, cz - h], [cx + h, cy, cz + h],
+                  [cx - h, cy, cz + h]], np.float32)
+    F = np.array([[0, 2, 1], [0, 3, 2]]) if up else np.array([[0, 1, 2], [0, 2, 3]])
+    return V, F
+
+
+def tiny_scene(rt):
+    """Floor (textured), a half mirror, a glass box with absorption; a sun and a spot."""
+    sc = RenderScene(rt)
+    checker = np.kron(np.indices((4, 4)).sum(axis=0) % 2, np.ones((1, 1)))[..., None] \
+        * np.array([0.7, 0.6, 0.5]) + 0.2
+    tex = sc.add_texture(checker)
+    floor = sc.add_material(Material(diffuse=(0.9, 0.8, 0.7), specular=(0.2, 0.2, 0.2),
+                                     shininess=20, texture=tex, uv_scale=(2.0, 2.0)))
+    mirror = sc.add_material(Material(diffuse=(0.2, 0.2, 0.8), reflectivity=0.5))
+    glass = sc.add_material(Material(diffuse=(0, 0, 0), specular=(1, 1, 1), shininess=200,
+                                     ior=IOR, absorption=(0.5, 0.2, 0.1)))
+    V, F = quad((0, 0, 0), 4)
+    uv = (V[:, [0, 2]] + 2) / 4
+    sc.add_instance(sc.add_mesh(V, F, uvs=uv, material=floor))
+    Vm = np.array([[-1, 0, -1], [1, 0, -1], [1, 1.5, -1.3], [-1, 1.5, -1.3]], np.float32)
+    sc.add_instance(sc.add_mesh(Vm, np.array([[0, 1, 2], [0, 2, 3]]), material=mirror))
+    Vb, Fb = box((-0.5, 0.2, 0.0), (0.5, 0.6, 0.8))
+    rot = np.eye(4)
+    c, s = np.cos(0.3), np.sin(0.3)
+    rot[[0, 0, 2, 2], [0, 2, 0, 2]] = c, s, -s, c
+    rot[:3, 3] = (0.1, 0.05, 0.0)
+    sc.add_instance(sc.add_mesh(Vb, Fb, material=glass), rot)
+    sc.add_light("directional", direction=(-0.3, -1, -0.2), color=(1, 1, 1))
+    sc.add_light("spot", position=(1, 2, 1), direction=(-0.4, -1, -0.4), color=(2, 2, 2),
+                 inner_angle=20, outer_angle=35)
+    return sc
+
+
+def compare_with_reference(rt, settings, eye=(0.5, 1.5, 3.0), target=(0, 0.3, 0)):
+    sc = tiny_scene(rt)
+    r = Renderer(rt, sc, settings)
+    r.set_camera(eye, target, (0, 1, 0), 50)
+    img = r.render()
+    fb = r.read_framebuffer()
+    stats = r.read_stats()
+    out = ref.render(sc.tables(), r.camera, r.params(), sc.lights)
+    ok = ~out["fragile"]
+    assert ok.mean() > 0.95
+    err = np.abs(fb - out["framebuffer"]).max(axis=2)
+    scale = np.maximum(1.0, out["framebuffer"].max(axis=2))
+    assert np.all(err[ok] <= 2e-4 * scale[ok]), f"max error {err[ok].max()}"
+    diff8 = np.abs(img.astype(int) - out["rgba"].astype(int))
+    assert diff8[ok].max() <= 1
+    assert np.isfinite(fb).all()
+    return stats
+
+
+def test_matches_float64_pipeline_with_reflection_and_refraction(rt):
+    s = RenderSettings(width=24, height=20, spp=1, bounces=3)
+    stats = compare_with_reference(rt, s)
+    # reflective and refractive bounces happened: children at depths 1..3
+    assert stats["rays_per_depth"][1] > 50 and stats["rays_per_depth"][3] > 0
+    assert stats["dropped"] == 0
+
+
+def test_matches_float64_pipeline_jittered_rows_schlick_tiled_chunks(rt):
+    s = RenderSettings(width=20, height=12, spp=2, bounces=2, order="rows", fresnel="schlick",
+                       tonemap="reinhard", exposure=1.5, seed=7, max_chunk_rays=96)
+    r = Renderer(rt, tiny_scene(rt), s)
+    assert len(r.chunks) > 1
+    compare_with_reference(rt, s)
+
+
+def test_jitter_grid_covers_spp():
+    for spp in (1, 2, 3, 4, 6, 8, 16, 64):
+        c = jitter_cols(spp)
+        assert spp % c == 0 and c * c <= spp
+
+
+def flat_water(rt, y=0.0, center=(0.0, 0.0)):
+    sc = RenderScene(rt)
+    water = sc.add_material(Material(diffuse=(0, 0, 0), ior=IOR))
+    V, F = quad((center[0], y, center[1]), 400.0)
+    sc.add_instance(sc.add_mesh(V, F, material=water))
+    return sc
+
+
+@pytest.mark.parametrize("from_below", [False, True])
+def test_flat_water_snell_fresnel_tir(rt, from_below):
+    """Children of camera rays at a flat water plane far from the origin: Snell directions,
+    Fresnel weights in float64, total reflection past the critical angle from below, and no
+    child ever hits the plane it left."""
+    cx, cz, y = 300.0, -200.0, 50.0
+    sc = flat_water(rt, y, (cx, cz))
+    s = RenderSettings(width=32, height=32, spp=1, bounces=1, min_weight=0.0)
+    r = Renderer(rt, sc, s)
+    eye = (cx, y - 1.0 if from_below else y + 1.0, cz)
+    r.set_camera(eye, (cx + 0.01, y, cz), (1, 0, 0), 120)
+    r.enqueue_frame()
+    counts = rt.to_host(r.counts, np.uint32, 3)
+    prim = rt.to_host(r.rays[0], RAY, int(counts[0]))
+    kids = rt.to_host(r.rays[1], RAY, int(counts[1]))
+    hits = rt.to_host(r.hits, np.dtype([("t", "f4"), ("u", "f4"), ("v", "f4"),
+                                        ("prim", "i4"), ("inst", "i4")]), int(counts[1]))
+    assert (hits["prim"] == -1).all(), "a child ray hit the plane it left"
+    by_pixel = {int(p["pixel"]): p for p in prim}
+    n = np.array([0.0, 1.0, 0.0])
+    eta = IOR if from_below else 1 / IOR
+    n_tir = n_two = 0
+    for pix in np.unique(kids["pixel"]):
+        p = by_pixel[int(pix)]
+        d = np.array([p["dx"], p["dy"], p["dz"]], np.float64)
+        d /= np.linalg.norm(d)
+        cosi = abs(d[1])
+        mine = kids[kids["pixel"] == pix]
+        F = float(ref.fresnel_exact(cosi, eta))
+        sin_t2 = eta**2 * (1 - cosi**2)
+        refl = mine[np.sign(mine["dy"]) != np.sign(d[1])]
+        refr = mine[np.sign(mine["dy"]) == np.sign(d[1])]
+        assert len(refl) == 1
+        rd = np.array([refl["dx"][0], refl["dy"][0], refl["dz"][0]])
+        np.testing.assert_allclose(rd, d * [1, -1, 1], atol=2e-6)
+        if sin_t2 >= 1 + 1e-5:
+            n_tir += 1
+            assert len(refr) == 0
+            np.testing.assert_allclose(refl["wr"][0], 1.0, rtol=1e-6)
+            continue
+        if sin_t2 > 1 - 1e-3:
+            continue  # within float32 reach of the critical angle
+        n_two += 1
+        assert len(refr) == 1
+        # float32 Fresnel loses digits near the critical angle (1 - sin^2 t cancels)
+        np.testing.assert_allclose(refl["wr"][0], F, rtol=2e-5, atol=3e-5)
+        np.testing.assert_allclose(refr["wr"][0], 1 - F, rtol=2e-5, atol=3e-5)
+        assert abs(refl["wr"][0] + refr["wr"][0] - 1.0) < 1e-6  # energy is split, not lost
+        t = np.array([refr["dx"][0], refr["dy"][0], refr["dz"][0]], np.float64)
+        # Snell: n1 sin(i) = n2 sin(t), in the plane of incidence, on the far side
+        sin_i = np.linalg.norm(np.cross(d, n))
+        sin_t = np.linalg.norm(np.cross(t, n))
+        np.testing.assert_allclose(sin_t, eta * sin_i, atol=3e-6)
+        assert abs(np.dot(np.cross(d, n), t)) < 3e-6
+        assert np.sign(t[1]) == np.sign(d[1])
+        assert abs(np.linalg.norm(t) - 1) < 1e-6
+    assert n_two > 100
+    if from_below:
+        assert n_tir > 50  # the wide view reaches past the critical angle
+    else:
+        assert n_tir == 0
+
+
+def test_aov_equals_intersect_on_camera_rays(rt):
+    from app.meshes import load_mesh
+    from raytrace import intersect
+
+    V, F = load_mesh("bunny_5k.obj")
+    sc = RenderScene(rt)
+    sc.add_instance(sc.add_mesh(V, F))
+    s = RenderSettings(width=48, height=40, spp=1, bounces=0, aov=True)
+    r = Renderer(rt, sc, s)
+    c = V.mean(axis=0)
+    ext = float(np.ptp(V, axis=0).max())
+    r.set_camera(c + np.array([0.3, 0.4, 1.5]) * ext, c, (0, 1, 0), 45)
+    r.enqueue_frame()
+    rays = rt.to_host(r.rays[0], RAY, r.n_q)
+    live = np.abs(rays["dx"]) + np.abs(rays["dy"]) + np.abs(rays["dz"]) > 0
+    rays = rays[live]
+    orig = np.stack([rays["ox"], rays["oy"], rays["oz"]], 1)
+    D = np.stack([rays["dx"], rays["dy"], rays["dz"]], 1)
+    hits = intersect(V, F, orig, D, device=rt)
+    x, y, _ = ref.pixel_of(r.camera, rays["pixel"])
+    aov = r.read_aov()
+    prim = aov["prim"][y, x]
+    depth = aov["depth"][y, x]
+    assert (hits["prim"] >= 0).mean() > 0.2
+    assert (prim == hits["prim"]).mean() >= 0.999
+    both = (prim >= 0) & (hits["prim"] >= 0)
+    np.testing.assert_allclose(depth[both], hits["t"][both], rtol=1e-5)
+    assert (aov["inst"][y, x][prim >= 0] == 0).all()
+    n = aov["normal"][y, x][prim >= 0]
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-5)
+    assert (np.sum(n * D[prim >= 0], axis=1) <= 1e-6).all()  # normals face the camera
+
+
+def test_contributions_never_exceed_one(rt):
+    sc = tiny_scene(rt)
+    s = RenderSettings(width=24, height=16, spp=4, bounces=2, min_weight=0.0)
+    r = Renderer(rt, sc, s)
+    r.set_camera((0.5, 1.5, 3.0), (0, 0.3, 0), (0, 1, 0), 50)
+    r.enqueue_frame()
+    counts = rt.to_host(r.counts, np.uint32, 3)
+    assert counts[1] > 0 and counts[2] > 0
+    for depth, buf in ((1, r.rays[1]), (2, r.rays[0])):  # the ping-pong buffers
+        rays = rt.to_host(buf, RAY, int(counts[depth]))
+        w = np.stack([rays["wr"], rays["wg"], rays["wb"]], 1).astype(np.float64)
+        assert (w >= 0).all() and (w <= 1.0 / s.spp + 1e-7).all()
+        per_pixel = np.zeros((int(rays["pixel"].max()) + 1, 3))
+        np.add.at(per_pixel, rays["pixel"], w)
+        assert per_pixel.max() <= 1.0 + 1e-6
+        assert np.all(np.diff(rays["pixel"].astype(np.int64)) >= 0)  # still sorted by pixel
+
+
+def test_shadow_rays_do_not_hit_their_own_surface(rt):
+    """A lit plane far from the origin under a grazing sun: every pixel equals the unshadowed
+    float64 shading (a shadow ray re-hitting its triangle would darken it)."""
+    sc = RenderScene(rt)
+    mat = sc.add_material(Material(diffuse=(0.8, 0.8, 0.8), specular=(0.5, 0.5, 0.5),
+                                   shininess=8))
+    V, F = quad((1000.0, 250.0, -700.0), 50.0)
+    sc.add_instance(sc.add_mesh(V, F, material=mat))
+    sc.add_light("directional", direction=(1.0, -0.12, 0.3), color=(2, 2, 2))
+    s = RenderSettings(width=24, height=24, spp=1, bounces=0)
+    r = Renderer(rt, sc, s)
+    r.set_camera((1000.0, 260.0, -690.0), (1000.0, 250.0, -700.0), (0, 1, 0), 60)
+    r.render()
+    fb = r.read_framebuffer()
+    lit_ref = ref.render(sc.tables(), r.camera, r.params(), sc.lights)["framebuffer"]
+    ambient_only = 0.05 * 0.8
+    hit = lit_ref.max(axis=2) > ambient_only * 1.5
+    assert hit.mean() > 0.9
+    np.testing.assert_allclose(fb[hit], lit_ref[hit], rtol=1e-4)
