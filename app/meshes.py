@@ -1,0 +1,145 @@
+"""Triangle meshes from files: ``load_mesh(path)`` -> float32 (n,3) vertices, uint32 (m,3) tris.
+
+Files are read with pyvista (imported only when needed: ``pv.read(path).triangulate().clean()``)
+and the result is cached as ``.npz`` in a ``cache/`` folder beside the file (or, when that folder is
+not writable, in the user cache folder). A cache records the SHA-1 of the file it came from, so an
+edited file is re-read. Machines without pyvista (the GPU box) load the committed caches.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+
+from app.errors import InputError
+
+#: Bump when the loader's output for the same file changes; part of every cache.
+CACHE_VERSION = 1
+MODELS_DIR = Path(__file__).resolve().parent.parent / "scenes" / "models"
+
+
+def _sha1(path: Path) -> str:
+    h = hashlib.sha1()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _cache_candidates(path: Path) -> list[Path]:
+    user = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "lbwater" / "meshes"
+    return [path.parent / "cache" / f"{path.name}.npz", user / f"{path.stem}-{path.suffix[1:]}.npz"]
+
+
+def _read_cache(cache: Path, digest: str):
+    try:
+        with np.load(cache) as z:
+            if str(z["sha1"]) != digest or int(z["version"]) != CACHE_VERSION:
+                return None
+            return z["vertices"].astype(np.float32), z["triangles"].astype(np.uint32)
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def _write_cache(path: Path, digest: str, vertices: np.ndarray, triangles: np.ndarray) -> None:
+    from app.io import atomic_path
+
+    for cache in _cache_candidates(path):
+        try:
+            with atomic_path(cache, suffix=".partial.npz") as tmp:
+                np.savez_compressed(tmp, vertices=vertices, triangles=triangles,
+                                    sha1=np.array(digest), version=np.array(CACHE_VERSION))
+                os.chmod(tmp, 0o644)
+            return
+        except OSError:
+            continue
+
+
+def _read_with_pyvista(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        import pyvista as pv
+    except ImportError:
+        raise InputError(f"{path}: reading meshes needs pyvista (pip install pyvista), and no "
+                         "up-to-date .npz cache was found beside it") from None
+    try:
+        data = pv.read(str(path))
+    except Exception as exc:  # vtk raises many kinds; the user needs one line
+        raise InputError(f"{path}: unreadable mesh ({type(exc).__name__}: {exc})") from None
+    if not isinstance(data, pv.PolyData):
+        data = data.extract_surface()
+    if data.n_cells == 0:
+        raise InputError(f"{path}: no triangles in the file")
+    # clean() merges coincident points; triangles that collapse become lines or points and are
+    # moved out of `faces`, so what is left in `faces` is a valid triangle list.
+    mesh = data.triangulate().clean()
+    faces = np.asarray(mesh.faces)
+    if faces.size == 0:
+        raise InputError(f"{path}: no triangles in the file (after merging coincident points)")
+    if faces.size % 4 or np.any(faces.reshape(-1, 4)[:, 0] != 3):
+        raise InputError(f"{path}: polygons left after triangulation (not a surface mesh?)")
+    triangles = faces.reshape(-1, 4)[:, 1:].astype(np.uint32)
+    vertices = np.asarray(mesh.points, dtype=np.float32).reshape(-1, 3)
+    return vertices, triangles
+
+
+def validate_mesh(vertices: np.ndarray, triangles: np.ndarray, name: str = "mesh"
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Return C-contiguous float32 (n,3) / uint32 (m,3) copies or raise a one-line error."""
+    v = np.asarray(vertices)
+    t = np.asarray(triangles)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise InputError(f"{name}: vertices must have shape (n, 3), got {v.shape}")
+    if t.ndim != 2 or t.shape[1] != 3:
+        raise InputError(f"{name}: triangles must have shape (m, 3), got {t.shape}")
+    if len(t) == 0:
+        raise InputError(f"{name}: no triangles")
+    if not np.issubdtype(t.dtype, np.integer):
+        raise InputError(f"{name}: triangles must be integers, got {t.dtype}")
+    if t.min() < 0 or t.max() >= len(v):
+        raise InputError(f"{name}: triangle indices must lie in [0, {len(v) - 1}], "
+                         f"got [{t.min()}, {t.max()}]")
+    v = np.ascontiguousarray(v, dtype=np.float32)
+    if not np.isfinite(v).all():
+        bad = int(np.flatnonzero(~np.isfinite(v).all(axis=1))[0])
+        raise InputError(f"{name}: vertex {bad} has a non-finite coordinate {v[bad].tolist()}")
+    return v, np.ascontiguousarray(t, dtype=np.uint32)
+
+
+def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices float32 (n,3) and triangles uint32 (m,3) of the mesh file ``path``.
+
+    A bare name (``"dragon_100k.obj"``) is looked up in ``scenes/models/`` when it is not a file
+    in the working folder. Results are cached (see the module docstring).
+    """
+    path = Path(path)
+    if not path.is_file() and not path.is_absolute() and (MODELS_DIR / path).is_file():
+        path = MODELS_DIR / path
+    if not path.is_file():
+        raise InputError(f"{path}: mesh file not found")
+    digest = _sha1(path)
+    for cache in _cache_candidates(path):
+        if cache.is_file():
+            hit = _read_cache(cache, digest)
+            if hit is not None:
+                return validate_mesh(*hit, name=str(path))
+    vertices, triangles = _read_with_pyvista(path)
+    vertices, triangles = validate_mesh(vertices, triangles, name=str(path))
+    _write_cache(path, digest, vertices, triangles)
+    return vertices, triangles
+
+
+def height_field_grid(n: int, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The BVH benchmark's water-like height field, exactly as NVIDIA Warp's anchor script
+    (``../shared/bench/warp_anchor.py`` grid()): n x n vertices over [-1,1]^2, 2 (n-1)^2
+    triangles; ``t`` shifts the waves (a deformed grid of the same topology)."""
+    x = np.linspace(-1, 1, n, dtype=np.float32)
+    X, Z = np.meshgrid(x, x)
+    Y = 0.03 * np.sin(9 * X + t) * np.cos(7 * Z) + 0.01 * np.sin(31 * (X + Z))
+    pts = np.stack([X, Y, Z], -1).reshape(-1, 3).astype(np.float32)
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1], i[:-1, 1:], i[1:, :-1], i[1:, 1:]
+    tri = np.stack([np.stack([a, c, b], -1), np.stack([b, c, d], -1)], -2).reshape(-1, 3)
+    return pts, tri.astype(np.uint32)

@@ -1,0 +1,168 @@
+/* Device functions of the LBVH builder shared by the triangle (bvh_build.cl) and instance
+   (bvh_tlas.cl) builds: extended isotropic Morton codes and the one-pass bottom-up hierarchy of
+   Apetrei (2014) with boxes written into the parent, the leaf collapse, and the root record. */
+#ifndef LBWATER_BVH_HIERARCHY_H
+#define LBWATER_BVH_HIERARCHY_H
+
+#include "bvh.h"
+
+/* Bits per axis are capped: float32 centroids carry 24 bits, and the cap keeps (c - lo) * scale
+   exact enough that neighbouring cells are ordered correctly. */
+#define MORTON_MAX_AXIS_BITS 21
+
+/* Morton code with one scale for all axes ("isotropic"): each of the key_bits bits, from the top,
+   halves the axis whose cells are currently the longest (ties go to x, then y, then z). A flat
+   height field therefore spends its first bits on its two long axes and only a few on its thin
+   one, and the cells stay near-cubic; a cube gets the classic x,y,z interleave. Every thread
+   derives the same schedule from the same bounds. NaN centroids get code 0. */
+inline uint morton_isotropic(float3 c, float3 lo, float3 ext, int key_bits) {
+    float cell[3] = {ext.x, ext.y, ext.z};
+    int nb[3] = {0, 0, 0};
+    uint axis_lo = 0, axis_hi = 0; /* 2 bits per key bit: which axis supplies it */
+    int used = 0;
+    for (; used < key_bits; ++used) {
+        int a = -1;
+        float best = 0.0f;
+        for (int k = 0; k < 3; ++k) {
+            if (nb[k] < MORTON_MAX_AXIS_BITS && cell[k] > best) {
+                best = cell[k];
+                a = k;
+            }
+        }
+        if (a < 0) break; /* every axis is flat or exhausted: the remaining bits stay 0 */
+        cell[a] *= 0.5f;
+        nb[a] += 1;
+        if (used < 16) axis_lo |= (uint)a << (2 * used);
+        else axis_hi |= (uint)a << (2 * (used - 16));
+    }
+    float cc[3] = {c.x - lo.x, c.y - lo.y, c.z - lo.z};
+    float ee[3] = {ext.x, ext.y, ext.z};
+    uint q[3];
+    for (int k = 0; k < 3; ++k) {
+        q[k] = 0;
+        if (nb[k] > 0) {
+            float cells = (float)(1u << nb[k]);
+            float f = cc[k] / ee[k] * cells;
+            f = isnan(f) ? 0.0f : clamp(f, 0.0f, cells - 1.0f);
+            q[k] = (uint)f;
+        }
+    }
+    uint key = 0;
+    int taken[3] = {0, 0, 0};
+    for (int b = 0; b < used; ++b) {
+        uint a = b < 16 ? (axis_lo >> (2 * b)) & 3u : (axis_hi >> (2 * (b - 16))) & 3u;
+        int sh = nb[a] - 1 - taken[a];
+        taken[a] += 1;
+        key = (key << 1) | ((q[a] >> sh) & 1u);
+    }
+    return key << (key_bits - used);
+}
+
+/* Morton bounds of a BVH from its header (set by the bounds pass). */
+inline void morton_frame(__global const BvhInfo* info, float3* lo, float3* ext) {
+    __global const int* cmin = (__global const int*)&info->cmin;
+    __global const int* cmax = (__global const int*)&info->cmax;
+    float3 a = (float3)(ordered_to_float(cmin[0]), ordered_to_float(cmin[1]),
+                        ordered_to_float(cmin[2]));
+    float3 b = (float3)(ordered_to_float(cmax[0]), ordered_to_float(cmax[1]),
+                        ordered_to_float(cmax[2]));
+    *lo = a;
+    *ext = fmax(b - a, (float3)(0.0f));
+}
+
+/* Work-group reduction of centroid bounds [a, b] (pass a = +inf, b = -inf for nothing), then 6
+   atomics per group into the header. Every thread of the group must call it. */
+#define BOUNDS_WG 256
+inline void reduce_centroid_bounds(float3 a, float3 b, __local float* lmin, __local float* lmax,
+                                   __global BvhInfo* info) {
+    int lid = get_local_id(0);
+    lmin[3 * lid] = a.x; lmin[3 * lid + 1] = a.y; lmin[3 * lid + 2] = a.z;
+    lmax[3 * lid] = b.x; lmax[3 * lid + 1] = b.y; lmax[3 * lid + 2] = b.z;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int s = BOUNDS_WG / 2; s > 0; s >>= 1) {
+        if (lid < s) {
+            for (int k = 0; k < 3; ++k) {
+                lmin[3 * lid + k] = fmin(lmin[3 * lid + k], lmin[3 * (lid + s) + k]);
+                lmax[3 * lid + k] = fmax(lmax[3 * lid + k], lmax[3 * (lid + s) + k]);
+            }
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid < 3) {
+        __global int* cmin = (__global int*)&info->cmin;
+        __global int* cmax = (__global int*)&info->cmax;
+        if (lmin[lid] <= lmax[lid]) {
+            atomic_min(cmin + lid, float_to_ordered(lmin[lid]));
+            atomic_max(cmax + lid, float_to_ordered(lmax[lid]));
+        }
+    }
+}
+
+/* Split "distance" between sorted neighbours j and j+1: the xor of their keys, extended below by
+   the xor of their positions, so equal keys still split in a balanced way (the key with its index
+   appended is unique) and no ladder of equal keys forms. At most 64 significant bits, so the tree
+   is a radix tree at most 64 levels deep. */
+inline ulong bvh_delta(__global const uint* restrict keys, int j) {
+    return ((ulong)(keys[j] ^ keys[j + 1]) << 32) | (ulong)(uint)(j ^ (j + 1));
+}
+
+/* Bottom-up walk of leaf i (Apetrei 2014). Internal node k (0 <= k < n-1) splits between sorted
+   positions k and k+1. A node [l, r] becomes the left child of node r if delta(r) < delta(l-1), else
+   the right child of node l-1. It writes its box and reference into its side of the parent, and
+   the second of the two children to arrive (atomic exchange on flags[parent]) goes on with the
+   union. Subtrees of at most leaf_size primitives are referenced as one leaf (the collapse); the
+   inner nodes below them are computed but never referenced. The second arrival restores
+   flags[parent] = -1, so the flags are ready for the next build or refit without a fill. */
+inline void bvh_walk(int i, int n, int leaf_size, int node_base, int prim_base,
+                     __global const uint* restrict keys, __global BvhNode* nodes,
+                     __global int* flags, __global BvhInfo* info, float3 lo, float3 hi) {
+    int l = i, r = i, cur = -1;
+    for (;;) { /* the range grows every round: at most n rounds, at most 64 levels in practice */
+        bool is_left = l == 0 || (r != n - 1 && bvh_delta(keys, r) < bvh_delta(keys, l - 1));
+        int parent = is_left ? r : l - 1;
+        int size = r - l + 1;
+        int ref = size <= leaf_size ? prim_base + l : node_base + cur;
+        int count = size <= leaf_size ? size : 0;
+        __global BvhNode* p = nodes + node_base + parent;
+        if (is_left) {
+            p->lo_l = (float4)(lo, as_float(ref));
+            p->hi_l = (float4)(hi, as_float(count));
+        } else {
+            p->lo_r = (float4)(lo, as_float(ref));
+            p->hi_r = (float4)(hi, as_float(count));
+        }
+        mem_fence(CLK_GLOBAL_MEM_FENCE);
+        int other = atomic_xchg(flags + parent, is_left ? l : r);
+        if (other < 0) return; /* first to arrive: the sibling finishes the parent */
+        flags[parent] = -1;
+        volatile __global float4* pv = (volatile __global float4*)p;
+        float4 slo = is_left ? pv[2] : pv[0];
+        float4 shi = is_left ? pv[3] : pv[1];
+        lo = fmin(lo, slo.xyz);
+        hi = fmax(hi, shi.xyz);
+        if (is_left) r = other;
+        else l = other;
+        cur = parent;
+        if (l == 0 && r == n - 1) {
+            info->root = node_base + cur;
+            info->lo = (float4)(lo, 0.0f);
+            info->hi = (float4)(hi, 0.0f);
+            return;
+        }
+    }
+}
+
+/* A BVH of n <= leaf_size primitives: one node whose left child is the whole leaf. */
+inline void bvh_small_root(int n, int node_base, int prim_base, __global BvhNode* nodes,
+                           __global BvhInfo* info, float3 lo, float3 hi) {
+    __global BvhNode* p = nodes + node_base;
+    p->lo_l = (float4)(lo, as_float(prim_base));
+    p->hi_l = (float4)(hi, as_float(n));
+    p->lo_r = (float4)(0.0f, 0.0f, 0.0f, as_float(0));
+    p->hi_r = (float4)(0.0f, 0.0f, 0.0f, as_float(BVH_CHILD_EMPTY));
+    info->root = node_base;
+    info->lo = (float4)(lo, 0.0f);
+    info->hi = (float4)(hi, 0.0f);
+}
+
+#endif

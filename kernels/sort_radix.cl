@@ -1,0 +1,170 @@
+/* Least-significant-digit radix sort of (uint key, uint value) pairs, RADIX_BITS per pass
+   (raytrace.sort.RadixSorter). One pass is three launches:
+     radix_histogram : digit counts per tile -> counts[digit * n_tiles + tile]
+     radix_scan      : exclusive scan of counts (one work-group), giving each (digit, tile) its
+                       first output position
+     radix_scatter   : stable rank inside the tile (per-thread counts + a local scan), the tile
+                       reordered in local memory, then written out in runs of equal digits
+   A tile is RADIX_WG threads x RADIX_ITEMS keys. The sort is stable, so the passes compose. */
+
+#ifndef RADIX_WG
+#define RADIX_WG 256
+#endif
+#ifndef RADIX_ITEMS
+#define RADIX_ITEMS 8
+#endif
+#define RADIX_BITS 4
+#define RADIX (1 << RADIX_BITS)
+#define RADIX_TILE (RADIX_WG * RADIX_ITEMS)
+#define SCAN_WG 256
+
+/* Per-thread digit counts packed 4 bits per digit (RADIX_ITEMS <= 15) in a ulong. */
+inline uint packed_count(ulong packed, uint d) {
+    return (uint)(packed >> (4 * d)) & 15u;
+}
+
+/* Exclusive scan over the RADIX_WG values `v` (one per thread); returns this thread's prefix and
+   the total through *total. Hillis-Steele in local memory. */
+inline uint wg_exclusive_scan(uint v, __local uint* tmp, uint* total) {
+    int lid = get_local_id(0);
+    tmp[lid] = v;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int off = 1; off < RADIX_WG; off <<= 1) {
+        uint add = lid >= off ? tmp[lid - off] : 0u;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        tmp[lid] += add;
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    *total = tmp[RADIX_WG - 1];
+    uint incl = tmp[lid];
+    barrier(CLK_LOCAL_MEM_FENCE);
+    return incl - v;
+}
+
+__kernel __attribute__((reqd_work_group_size(RADIX_WG, 1, 1)))
+void radix_histogram(uint n, uint shift, __global const uint* restrict keys,
+                     __global uint* restrict counts, uint n_tiles) {
+    __local uint part[RADIX * RADIX_WG];
+    int lid = get_local_id(0);
+    uint tile = get_group_id(0);
+    uint base = tile * RADIX_TILE;
+    ulong packed = 0;
+    for (int k = 0; k < RADIX_ITEMS; ++k) {
+        uint j = base + k * RADIX_WG + lid;
+        if (j < n) packed += 1ul << (4 * ((keys[j] >> shift) & (RADIX - 1)));
+    }
+    for (int d = 0; d < RADIX; ++d) part[d * RADIX_WG + lid] = packed_count(packed, d);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    /* tree reduction of each digit's RADIX_WG counts */
+    for (int s = RADIX_WG / 2; s > 0; s >>= 1) {
+        if (lid < s)
+            for (int d = 0; d < RADIX; ++d) part[d * RADIX_WG + lid] += part[d * RADIX_WG + lid + s];
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid < RADIX) counts[lid * n_tiles + tile] = part[lid * RADIX_WG];
+}
+
+/* In-place exclusive scan of counts[0..len) by one work-group, SCAN_WG x 4 values per round. */
+__kernel __attribute__((reqd_work_group_size(SCAN_WG, 1, 1)))
+void radix_scan(uint len, __global uint* counts) {
+    __local uint tmp[SCAN_WG];
+    int lid = get_local_id(0);
+    uint carry = 0;
+    for (uint base = 0; base < len; base += 4 * SCAN_WG) {
+        uint j = base + 4 * lid;
+        uint4 v = (uint4)(0);
+        if (j + 3 < len) v = vload4(0, counts + j);
+        else {
+            if (j < len) v.x = counts[j];
+            if (j + 1 < len) v.y = counts[j + 1];
+            if (j + 2 < len) v.z = counts[j + 2];
+        }
+        uint s = v.x + v.y + v.z + v.w;
+        /* Hillis-Steele over the per-thread sums */
+        tmp[lid] = s;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        for (int off = 1; off < SCAN_WG; off <<= 1) {
+            uint add = lid >= off ? tmp[lid - off] : 0u;
+            barrier(CLK_LOCAL_MEM_FENCE);
+            tmp[lid] += add;
+            barrier(CLK_LOCAL_MEM_FENCE);
+        }
+        uint total = tmp[SCAN_WG - 1];
+        uint pre = carry + tmp[lid] - s;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        uint4 o = (uint4)(pre, pre + v.x, pre + v.x + v.y, pre + v.x + v.y + v.z);
+        if (j + 3 < len) vstore4(o, 0, counts + j);
+        else {
+            if (j < len) counts[j] = o.x;
+            if (j + 1 < len) counts[j + 1] = o.y;
+            if (j + 2 < len) counts[j + 2] = o.z;
+        }
+        carry += total;
+    }
+}
+
+__kernel __attribute__((reqd_work_group_size(RADIX_WG, 1, 1)))
+void radix_scatter(uint n, uint shift, __global const uint* restrict keys_in,
+                   __global const uint* restrict vals_in, __global uint* restrict keys_out,
+                   __global uint* restrict vals_out, __global const uint* restrict offsets,
+                   uint n_tiles) {
+    __local uint lk[RADIX_TILE];
+    __local uint lv[RADIX_TILE];
+    __local uint hist[RADIX * RADIX_WG];
+    __local uint tmp[RADIX_WG];
+    __local uint dstart[RADIX], gofs[RADIX];
+    int lid = get_local_id(0);
+    uint tile = get_group_id(0);
+    uint base = tile * RADIX_TILE;
+    uint valid = min((uint)RADIX_TILE, n - base);
+    /* coalesced load; padding keys sort last (largest digit, highest position) */
+    for (int k = 0; k < RADIX_ITEMS; ++k) {
+        uint j = k * RADIX_WG + lid;
+        lk[j] = j < valid ? keys_in[base + j] : 0xffffffffu;
+        lv[j] = j < valid ? vals_in[base + j] : 0u;
+    }
+    if (lid < RADIX) gofs[lid] = offsets[lid * n_tiles + tile];
+    barrier(CLK_LOCAL_MEM_FENCE);
+    /* this thread's RADIX_ITEMS consecutive keys, in tile order */
+    uint mk[RADIX_ITEMS], mv[RADIX_ITEMS];
+    ulong packed = 0;
+    for (int k = 0; k < RADIX_ITEMS; ++k) {
+        mk[k] = lk[lid * RADIX_ITEMS + k];
+        mv[k] = lv[lid * RADIX_ITEMS + k];
+        packed += 1ul << (4 * ((mk[k] >> shift) & (RADIX - 1)));
+    }
+    for (int d = 0; d < RADIX; ++d) hist[d * RADIX_WG + lid] = packed_count(packed, d);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    /* exclusive scan of hist in digit-major order: thread t owns RADIX consecutive entries */
+    uint run[RADIX];
+    uint s = 0;
+    for (int q = 0; q < RADIX; ++q) {
+        run[q] = s;
+        s += hist[lid * RADIX + q];
+    }
+    uint total;
+    uint pre = wg_exclusive_scan(s, tmp, &total);
+    for (int q = 0; q < RADIX; ++q) hist[lid * RADIX + q] = pre + run[q];
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (lid < RADIX) dstart[lid] = hist[lid * RADIX_WG];
+    /* stable local positions; the tile is rewritten in digit order */
+    ulong seen = 0;
+    for (int k = 0; k < RADIX_ITEMS; ++k) {
+        uint d = (mk[k] >> shift) & (RADIX - 1);
+        uint pos = hist[d * RADIX_WG + lid] + packed_count(seen, d);
+        seen += 1ul << (4 * d);
+        lk[pos] = mk[k];
+        lv[pos] = mv[k];
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int k = 0; k < RADIX_ITEMS; ++k) {
+        uint j = k * RADIX_WG + lid;
+        if (j < valid) {
+            uint key = lk[j];
+            uint d = (key >> shift) & (RADIX - 1);
+            uint dst = gofs[d] + j - dstart[d];
+            keys_out[dst] = key;
+            vals_out[dst] = lv[j];
+        }
+    }
+}

@@ -1,0 +1,250 @@
+/* Ray traversal of the two-level scene, usable from any kernel:
+       __kernel void k(SCENE_PARAMS, ...) { Hit h = scene_closest_hit(SCENE_ARGS, o, d, 0, INFINITY); }
+   World-space rays; the direction need not be unit length and t is in units of it.
+   Triangle test: watertight (Woop, Benthin & Wald 2013), two-sided, with a float64 re-evaluation
+   of edge functions that come out exactly zero. Box test: slabs with the far distance enlarged by
+   2 gamma(3) (pbrt), so rounding never culls a box the triangle test would hit.
+   Traversal: both child boxes per node, leaves tested when met, near child first, one stack per
+   level of TRACE_STACK entries. The builder's trees are at most 64 levels deep (bvh_delta), so the
+   stack cannot overflow; the guard still counts an overflow in trace_stats instead of writing
+   past the stack, so it could never be silent. */
+#ifndef LBWATER_TRAVERSE_H
+#define LBWATER_TRAVERSE_H
+
+#include "scene.h"
+
+/* Fused multiply-adds would make a shared edge's function differ between its two triangles. */
+#pragma OPENCL FP_CONTRACT OFF
+
+#ifdef cl_khr_fp64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#define TRAVERSE_FP64 1
+#endif
+
+#define TRACE_STACK 64
+/* 1 + 2 gamma(3), gamma(n) = n eps / (1 - n eps), eps = 2^-24 */
+#define TRACE_BOX_GROW 1.0000003576278687f
+
+/* A ray prepared for one level of traversal (world for the TLAS, object space for a BLAS). */
+typedef struct {
+    float3 org;
+    float3 idir;
+    int kx, ky, kz;
+    float sx, sy, sz;
+} TraceRay;
+
+inline float trace_axis(float3 v, int k) {
+    return k == 0 ? v.x : (k == 1 ? v.y : v.z);
+}
+
+inline float trace_safe_rcp(float d) {
+    /* a zero component becomes a huge finite reciprocal: no 0 * inf = NaN in the slab test */
+    return 1.0f / (fabs(d) > 1e-30f ? d : copysign(1e-30f, d));
+}
+
+inline TraceRay trace_ray_setup(float3 org, float3 dir) {
+    TraceRay r;
+    r.org = org;
+    r.idir = (float3)(trace_safe_rcp(dir.x), trace_safe_rcp(dir.y), trace_safe_rcp(dir.z));
+    float3 ad = fabs(dir);
+    int kz = (ad.x >= ad.y && ad.x >= ad.z) ? 0 : (ad.y >= ad.z ? 1 : 2);
+    int kx = kz == 2 ? 0 : kz + 1;
+    int ky = kx == 2 ? 0 : kx + 1;
+    float dz = trace_axis(dir, kz);
+    if (dz < 0.0f) {
+        int s = kx;
+        kx = ky;
+        ky = s;
+    }
+    r.kx = kx;
+    r.ky = ky;
+    r.kz = kz;
+    r.sx = trace_axis(dir, kx) / dz;
+    r.sy = trace_axis(dir, ky) / dz;
+    r.sz = 1.0f / dz;
+    return r;
+}
+
+/* Entry distance of the ray into [lo, hi] within [tmin, tmax], or INFINITY when it misses. */
+inline float trace_box(float3 lo, float3 hi, const TraceRay* r, float tmin, float tmax) {
+    float3 t0 = (lo - r->org) * r->idir, t1 = (hi - r->org) * r->idir;
+    float3 tn = fmin(t0, t1), tf = fmax(t0, t1);
+    float tnear = fmax(fmax(tn.x, tn.y), fmax(tn.z, tmin));
+    float tfar = fmin(fmin(tf.x, tf.y), tf.z) * TRACE_BOX_GROW;
+    tfar = fmin(tfar, tmax);
+    return tnear <= tfar ? tnear : INFINITY;
+}
+
+/* Watertight ray-triangle test. On a hit in [tmin, tmax) writes t and Embree barycentrics. */
+inline bool trace_triangle(const TraceRay* r, float3 p0, float3 p1, float3 p2, float tmin,
+                           float tmax, float* t_out, float* u_out, float* v_out) {
+    float3 A = p0 - r->org, B = p1 - r->org, C = p2 - r->org;
+    float az = trace_axis(A, r->kz), bz = trace_axis(B, r->kz), cz = trace_axis(C, r->kz);
+    float ax = trace_axis(A, r->kx) - r->sx * az, ay = trace_axis(A, r->ky) - r->sy * az;
+    float bx = trace_axis(B, r->kx) - r->sx * bz, by = trace_axis(B, r->ky) - r->sy * bz;
+    float cx = trace_axis(C, r->kx) - r->sx * cz, cy = trace_axis(C, r->ky) - r->sy * cz;
+    float U = cx * by - cy * bx;
+    float V = ax * cy - ay * cx;
+    float W = bx * ay - by * ax;
+#ifdef TRAVERSE_FP64
+    if (U == 0.0f || V == 0.0f || W == 0.0f) {
+        U = (float)((double)cx * (double)by - (double)cy * (double)bx);
+        V = (float)((double)ax * (double)cy - (double)ay * (double)cx);
+        W = (float)((double)bx * (double)ay - (double)by * (double)ax);
+    }
+#endif
+    if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f)) return false;
+    float det = U + V + W;
+    if (det == 0.0f) return false;
+    float T = U * (r->sz * az) + V * (r->sz * bz) + W * (r->sz * cz);
+    float rcp = 1.0f / det;
+    float t = T * rcp;
+    if (!(t >= tmin && t < tmax)) return false;
+    *t_out = t;
+    *u_out = V * rcp;
+    *v_out = W * rcp;
+    return true;
+}
+
+inline void trace_push(int* stack, int* sp, int node, __global int* restrict trace_stats) {
+    if (*sp < TRACE_STACK) stack[(*sp)++] = node;
+    else atomic_inc(trace_stats + TRACE_STAT_OVERFLOW);
+}
+
+/* One mesh's BVH from `root`. Shrinks *tmax to each closer hit and records it in *hit. */
+inline bool trace_blas(__global const BvhNode* restrict nodes,
+                       __global const BvhTri* restrict tris, int root, const TraceRay* r,
+                       float tmin, float* tmax, Hit* hit, int inst, bool any,
+                       __global int* restrict trace_stats) {
+    int stack[TRACE_STACK];
+    int sp = 0, node = root;
+    bool found = false;
+    for (;;) {
+        __global const BvhNode* n = nodes + node;
+        float4 a = n->lo_l, b = n->hi_l, c = n->lo_r, d = n->hi_r;
+        int cl = as_int(b.w), cr = as_int(d.w);
+        int rl = as_int(a.w), rr = as_int(c.w);
+        float tl = cl >= 0 ? trace_box(a.xyz, b.xyz, r, tmin, *tmax) : INFINITY;
+        float tr = cr >= 0 ? trace_box(c.xyz, d.xyz, r, tmin, *tmax) : INFINITY;
+        for (int side = 0; side < 2; ++side) {
+            int cnt = side ? cr : cl, first = side ? rr : rl;
+            float te = side ? tr : tl;
+            if (cnt > 0 && te < INFINITY) {
+                for (int k = first; k < first + cnt; ++k) {
+                    float t, u, v;
+                    BvhTri tri = tris[k];
+                    if (trace_triangle(r, tri.p0.xyz, tri.p1.xyz, tri.p2.xyz, tmin, *tmax, &t,
+                                       &u, &v)) {
+                        *tmax = t;
+                        hit->t = t;
+                        hit->u = u;
+                        hit->v = v;
+                        hit->prim = as_int(tri.p0.w);
+                        hit->inst = inst;
+                        found = true;
+                        if (any) return true;
+                    }
+                }
+            }
+        }
+        /* tl is INFINITY on a miss: the strict test also drops boxes now behind a closer hit */
+        bool gl = cl == 0 && tl < *tmax, gr = cr == 0 && tr < *tmax;
+        if (gl && gr) {
+            bool left_first = tl <= tr;
+            trace_push(stack, &sp, left_first ? rr : rl, trace_stats);
+            node = left_first ? rl : rr;
+        } else if (gl) {
+            node = rl;
+        } else if (gr) {
+            node = rr;
+        } else {
+            if (sp == 0) break;
+            node = stack[--sp];
+        }
+    }
+    return found;
+}
+
+/* The whole scene: the TLAS over instances, each instance's BLAS in its object space. */
+inline bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax, bool any,
+                        Hit* hit) {
+    hit->t = INFINITY;
+    hit->u = 0.0f;
+    hit->v = 0.0f;
+    hit->prim = -1;
+    hit->inst = -1;
+    int root = tlas_info->root;
+    if (root < 0 || !(tmax > tmin) || (dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f))
+        return false;
+    TraceRay wr = trace_ray_setup(org, dir);
+    float tbest = tmax;
+    int stack[TRACE_STACK];
+    int sp = 0, node = root;
+    bool found = false;
+    for (;;) {
+        __global const BvhNode* n = tlas_nodes + node;
+        float4 a = n->lo_l, b = n->hi_l, c = n->lo_r, d = n->hi_r;
+        int cl = as_int(b.w), cr = as_int(d.w);
+        int rl = as_int(a.w), rr = as_int(c.w);
+        float tl = cl >= 0 ? trace_box(a.xyz, b.xyz, &wr, tmin, tbest) : INFINITY;
+        float tr = cr >= 0 ? trace_box(c.xyz, d.xyz, &wr, tmin, tbest) : INFINITY;
+        for (int side = 0; side < 2; ++side) {
+            int cnt = side ? cr : cl, first = side ? rr : rl;
+            float te = side ? tr : tl;
+            if (cnt > 0 && te < INFINITY) {
+                for (int k = first; k < first + cnt; ++k) {
+                    int id = tlas_prims[k];
+                    __global const Instance* ins = instances + id;
+                    int broot = ins->blas_root;
+                    if (broot < 0) continue;
+                    float4 m0 = ins->object_from_world[0], m1 = ins->object_from_world[1],
+                           m2 = ins->object_from_world[2];
+                    float3 o = (float3)(dot(m0.xyz, org) + m0.w, dot(m1.xyz, org) + m1.w,
+                                        dot(m2.xyz, org) + m2.w);
+                    float3 dd = (float3)(dot(m0.xyz, dir), dot(m1.xyz, dir), dot(m2.xyz, dir));
+                    TraceRay lr = trace_ray_setup(o, dd);
+                    if (trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, &tbest, hit, id, any,
+                                   trace_stats)) {
+                        found = true;
+                        if (any) return true;
+                    }
+                }
+            }
+        }
+        bool gl = cl == 0 && tl < tbest, gr = cr == 0 && tr < tbest;
+        if (gl && gr) {
+            bool left_first = tl <= tr;
+            trace_push(stack, &sp, left_first ? rr : rl, trace_stats);
+            node = left_first ? rl : rr;
+        } else if (gl) {
+            node = rl;
+        } else if (gr) {
+            node = rr;
+        } else {
+            if (sp == 0) break;
+            node = stack[--sp];
+        }
+    }
+    return found;
+}
+
+/* Closest hit in [tmin, tmax): prim/inst -1 and t INFINITY on a miss. */
+inline Hit scene_closest_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
+    Hit h;
+    trace_scene(SCENE_ARGS, org, dir, tmin, tmax, false, &h);
+    return h;
+}
+
+/* Is anything hit in [tmin, tmax)? (shadow rays) */
+inline bool scene_any_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
+    Hit h;
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, &h);
+}
+
+/* Any hit, and which one was found first (not necessarily the closest). */
+inline bool scene_any_hit_record(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
+                                 Hit* h) {
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, h);
+}
+
+#endif

@@ -1,0 +1,289 @@
+"""Two-level scene: one BLAS per mesh, instances with 4x4 transforms, a TLAS rebuilt on the device.
+
+Every mesh's nodes and leaf-ordered triangles live in one shared node array and one triangle
+array (each BLAS writes at its own offsets), so any kernel sees the whole scene through the fixed
+parameter list ``SCENE_PARAMS`` of ``kernels/scene.h``; :meth:`Scene.trace_args` returns the
+buffers in that order. Hits name the instance id and the triangle's index in its mesh's own input
+order; ``mesh_record(mesh_id).prim_base`` (also in the device ``Instance``) maps that to a
+scene-wide triangle number if the renderer concatenates per-triangle attributes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pyopencl as cl
+
+from kernels.runtime import Runtime
+from raytrace.bvh import (
+    DEFAULT_LEAF_SIZE,
+    INFO_DTYPE,
+    INSTANCE_DTYPE,
+    NODE_DTYPE,
+    TRI_DTYPE,
+    Blas,
+    BlasStorage,
+    check_mesh_arrays,
+    node_count,
+    vertices_to_float4,
+)
+from raytrace.sort import make_sorter
+
+TLAS_LEAF_SIZE = 1
+TRACE_STATS_LEN = 4
+TRACE_STAT_OVERFLOW = 0
+BOUNDS_WG = 256
+
+
+@dataclasses.dataclass
+class MeshRecord:
+    """A mesh of the scene: its device buffers and where its BVH lives in the shared arrays."""
+
+    vertices_buf: cl.Buffer
+    triangles_buf: cl.Buffer
+    n_vertices: int
+    n_triangles: int
+    dynamic: bool
+    prim_base: int      #: first triangle in scene-wide numbering (sum of earlier meshes)
+    node_base: int = 0  #: first node slot in the shared node array
+    tri_base: int = 0   #: first slot in the shared leaf-ordered triangle array
+    blas: Blas | None = None
+
+
+def _affine_rows(m, what: str) -> np.ndarray:
+    """3x4 float32 rows of an affine 4x4 (or 3x4) world_from_object, validated."""
+    a = np.asarray(m, dtype=np.float64)
+    if a.shape not in ((4, 4), (3, 4)):
+        raise ValueError(f"{what}: world_from_object must be 4x4 (or 3x4), got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{what}: world_from_object has a non-finite entry")
+    if a.shape == (4, 4) and not np.allclose(a[3], [0, 0, 0, 1], atol=1e-9):
+        raise ValueError(f"{what}: world_from_object must be affine (last row 0 0 0 1), "
+                         f"got {a[3].tolist()}")
+    det = float(np.linalg.det(a[:3, :3]))
+    scale = float(np.abs(a[:3, :3]).max()) ** 3
+    if not abs(det) > 1e-12 * max(scale, 1e-300):
+        raise ValueError(f"{what}: world_from_object is singular (det {det:.3g})")
+    return a[:3].astype(np.float32)
+
+
+class Scene:
+    """Meshes, instances and the two-level BVH over them, on one device.
+
+    ``leaf_size``: most triangles per BLAS leaf. Typical use::
+
+        scene = Scene(rt)
+        water = scene.add_mesh(vbuf, tbuf, dynamic=True, n_vertices=nv, n_triangles=nt)
+        boat = scene.add_mesh(boat_vertices, boat_triangles)
+        scene.add_instance(water)
+        b = scene.add_instance(boat, world_from_boat)
+        scene.update()                 # first call builds everything
+        ...                            # each frame:
+        scene.set_transform(b, M); scene.update()   # refit water, rebuild the TLAS
+        kernel.set_args(*scene.trace_args(), ...)
+    """
+
+    def __init__(self, rt: Runtime, *, leaf_size: int = DEFAULT_LEAF_SIZE, stage: str = "bvh"):
+        self.rt, self.leaf_size, self.stage = rt, int(leaf_size), stage
+        self.meshes: list[MeshRecord] = []
+        self._inst_mesh: list[int] = []
+        self._xforms = np.zeros((0, 3, 4), np.float32)
+        self._storage_tris = -1        # triangle count the shared storage was made for
+        self._tlas_n = -1              # instance count the TLAS scratch was made for
+        self._xforms_dirty = True
+        self.trace_stats = rt.buffer(4 * TRACE_STATS_LEN)
+        cl.enqueue_fill_buffer(rt.queue, self.trace_stats, np.int32(0), 0, 4 * TRACE_STATS_LEN)
+        self.tlas_info = rt.buffer(INFO_DTYPE.itemsize)
+        self._k_reset = cl.Kernel(rt.program("bvh_build.cl"), "bvh_reset_info")
+        self._k_reset.set_args(self.tlas_info, np.int32(0), np.int32(0), np.int32(0))
+        self._k_reset.set_arg(2, np.int32(0))
+        self._init_empty_tlas()
+
+    # -- content ---------------------------------------------------------------------------
+    def add_mesh(self, vertices, triangles, *, dynamic: bool = False,
+                 n_vertices: int | None = None, n_triangles: int | None = None) -> int:
+        """Add a mesh; returns its mesh id.
+
+        ``vertices``/``triangles``: NumPy (n,3) floats / (m,3) ints (copied to the device), or
+        device buffers (float4 per vertex, 3 x uint32 per triangle; pass ``n_vertices`` and
+        ``n_triangles``; the scene keeps a reference and reads them at every build).
+        ``dynamic``: refitted (or rebuilt) by every :meth:`update`; static meshes are built once.
+        """
+        name = f"mesh {len(self.meshes)}"
+        if isinstance(vertices, cl.Buffer) != isinstance(triangles, cl.Buffer):
+            raise ValueError(f"{name}: give vertices and triangles both as NumPy arrays or both "
+                             "as device buffers")
+        if isinstance(vertices, cl.Buffer):
+            if n_vertices is None or n_triangles is None:
+                raise ValueError(f"{name}: device buffers need n_vertices= and n_triangles=")
+            vbuf, tbuf, nv, nt = vertices, triangles, int(n_vertices), int(n_triangles)
+            if nt < 1:
+                raise ValueError(f"{name}: n_triangles must be >= 1, got {nt}")
+        else:
+            v, t = check_mesh_arrays(vertices, triangles, name)
+            vbuf = self.rt.to_device(vertices_to_float4(v))
+            tbuf = self.rt.to_device(t)
+            nv, nt = len(v), len(t)
+        prim_base = sum(m.n_triangles for m in self.meshes)
+        self.meshes.append(MeshRecord(vbuf, tbuf, nv, nt, bool(dynamic), prim_base))
+        return len(self.meshes) - 1
+
+    def add_instance(self, mesh_id: int, world_from_object=None) -> int:
+        """Place mesh ``mesh_id`` with an affine 4x4 ``world_from_object`` (identity if None)."""
+        self._check_mesh_id(mesh_id)
+        rows = _affine_rows(np.eye(4) if world_from_object is None else world_from_object,
+                            f"instance {len(self._inst_mesh)}")
+        self._inst_mesh.append(int(mesh_id))
+        self._xforms = np.concatenate([self._xforms, rows[None]])
+        self._xforms_dirty = True
+        return len(self._inst_mesh) - 1
+
+    def set_transform(self, instance_id: int, world_from_object) -> None:
+        """Move an instance; takes effect at the next :meth:`update`."""
+        if not 0 <= int(instance_id) < len(self._inst_mesh):
+            raise ValueError(f"instance id {instance_id} out of range [0, {len(self._inst_mesh)})")
+        self._xforms[int(instance_id)] = _affine_rows(world_from_object,
+                                                      f"instance {instance_id}")
+        self._xforms_dirty = True
+
+    @property
+    def n_instances(self) -> int:
+        return len(self._inst_mesh)
+
+    def mesh_record(self, mesh_id: int) -> MeshRecord:
+        self._check_mesh_id(mesh_id)
+        return self.meshes[mesh_id]
+
+    def blas(self, mesh_id: int) -> Blas:
+        """The BLAS of a mesh (exists after the first :meth:`update`)."""
+        rec = self.mesh_record(mesh_id)
+        if rec.blas is None:
+            raise ValueError(f"mesh {mesh_id} has no BVH yet: call Scene.update() first")
+        return rec.blas
+
+    def _check_mesh_id(self, mesh_id) -> None:
+        if not 0 <= int(mesh_id) < len(self.meshes):
+            raise ValueError(f"mesh id {mesh_id} out of range [0, {len(self.meshes)})")
+
+    # -- device work -------------------------------------------------------------------------
+    def update(self, rebuild: bool = False) -> None:
+        """Bring the BVHs up to date (enqueued; no host sync).
+
+        New meshes are built; dynamic meshes are refitted, or rebuilt when ``rebuild``; the TLAS
+        is rebuilt over the instances' current transforms every call.
+        """
+        total = sum(m.n_triangles for m in self.meshes)
+        fresh = total != self._storage_tris
+        if fresh:
+            self._allocate_storage()
+        for rec in self.meshes:
+            if fresh or not rec.blas.built:
+                rec.blas.rebuild()
+            elif rec.dynamic:
+                if rebuild:
+                    rec.blas.rebuild()
+                else:
+                    rec.blas.refit()
+        self._build_tlas()
+
+    def _allocate_storage(self) -> None:
+        rt = self.rt
+        n_nodes = sum(node_count(m.n_triangles) for m in self.meshes)
+        n_tris = sum(m.n_triangles for m in self.meshes)
+        self.blas_nodes = rt.buffer(NODE_DTYPE.itemsize * max(n_nodes, 1))
+        self.blas_tris = rt.buffer(TRI_DTYPE.itemsize * max(n_tris, 1))
+        self.blas_infos = rt.buffer(INFO_DTYPE.itemsize * max(len(self.meshes), 1))
+        self.mesh_prim_base = rt.to_device(
+            np.array([m.prim_base for m in self.meshes] or [0], np.int32))
+        node_base = tri_base = 0
+        for i, rec in enumerate(self.meshes):
+            rec.node_base, rec.tri_base = node_base, tri_base
+            storage = BlasStorage(self.blas_nodes, node_base, self.blas_tris, tri_base,
+                                  self.blas_infos, i)
+            rec.blas = Blas(rt, rec.vertices_buf, rec.triangles_buf, rec.n_vertices,
+                            rec.n_triangles, leaf_size=self.leaf_size, storage=storage,
+                            stage=f"{self.stage}.blas")
+            node_base += node_count(rec.n_triangles)
+            tri_base += rec.n_triangles
+        self._storage_tris = n_tris
+        self._tlas_n = -1  # the TLAS kernels bind the BLAS headers: rebind them
+
+    def _init_empty_tlas(self) -> None:
+        rt = self.rt
+        self.tlas_nodes = rt.buffer(NODE_DTYPE.itemsize)
+        self.tlas_prims = rt.buffer(4)
+        self.instances = rt.buffer(INSTANCE_DTYPE.itemsize)
+        if not hasattr(self, "blas_nodes"):
+            self.blas_nodes = rt.buffer(NODE_DTYPE.itemsize)
+            self.blas_tris = rt.buffer(TRI_DTYPE.itemsize)
+
+    def _allocate_tlas(self, n: int) -> None:
+        rt = self.rt
+        self.tlas_nodes = rt.buffer(NODE_DTYPE.itemsize * node_count(n))
+        self.tlas_prims = rt.buffer(4 * n)      # sorted instance ids (the sort's values)
+        self._tlas_keys = rt.buffer(4 * n)
+        self._tlas_flags = rt.buffer(4 * node_count(n))
+        cl.enqueue_fill_buffer(rt.queue, self._tlas_flags, np.int32(-1), 0, 4 * node_count(n))
+        self.instances = rt.buffer(INSTANCE_DTYPE.itemsize * n)
+        self._tlas_boxes = rt.buffer(32 * n)
+        self._xforms_dev = rt.buffer(48 * n)
+        self._inst_mesh_dev = rt.to_device(np.array(self._inst_mesh, np.int32))
+        prg = rt.program("bvh_tlas.cl")
+        self._k_prep = cl.Kernel(prg, "tlas_prep")
+        self._k_prep.set_args(np.int32(n), self._xforms_dev, self._inst_mesh_dev,
+                              self.mesh_prim_base, self.blas_infos, self.instances,
+                              self._tlas_boxes, self.tlas_info)
+        self._k_morton = cl.Kernel(prg, "bvh_box_morton")
+        self._k_morton.set_args(np.int32(n), self._tlas_boxes, self.tlas_info, np.int32(32),
+                                self._tlas_keys, self.tlas_prims)
+        self._k_hier = cl.Kernel(prg, "bvh_hierarchy_boxes")
+        self._k_hier.set_args(np.int32(n), np.int32(TLAS_LEAF_SIZE), self._tlas_keys,
+                              self.tlas_prims, self._tlas_boxes, self.tlas_nodes,
+                              self._tlas_flags, self.tlas_info)
+        self._tlas_sorter = make_sorter(rt, self._tlas_keys, self.tlas_prims, n,
+                                        stage=f"{self.stage}.tlas.sort")
+        self._tlas_n = n
+        self._xforms_dirty = True
+
+    def _build_tlas(self) -> None:
+        rt, n, st = self.rt, self.n_instances, f"{self.stage}.tlas"
+        self._k_reset.set_arg(2, np.int32(n))
+        rt.launch(f"{st}.reset", self._k_reset, 1)  # root = -1: an empty scene misses
+        if n == 0:
+            return
+        if n != self._tlas_n:
+            self._allocate_tlas(n)
+        if self._xforms_dirty:
+            # non-blocking: pyopencl keeps the host array alive until the copy is done
+            evt = cl.enqueue_copy(rt.queue, self._xforms_dev, self._xforms.copy(),
+                                  is_blocking=False)
+            rt.record(f"{st}.upload", evt)
+            self._xforms_dirty = False
+        rt.launch(f"{st}.prep", self._k_prep, -(-n // BOUNDS_WG) * BOUNDS_WG, BOUNDS_WG)
+        rt.launch(f"{st}.morton", self._k_morton, n)
+        self._tlas_sorter.enqueue()
+        rt.launch(f"{st}.hierarchy", self._k_hier, n)
+
+    # -- kernels' view ----------------------------------------------------------------------
+    def trace_args(self) -> list:
+        """Buffers for ``SCENE_PARAMS`` (kernels/scene.h), in order; valid after update()."""
+        return [self.tlas_info, self.tlas_nodes, self.tlas_prims, self.instances,
+                self.blas_nodes, self.blas_tris, self.trace_stats]
+
+    def check(self) -> dict:
+        """Read the device's guards (synchronises): raise ValueError on non-finite vertices or a
+        traversal-stack overflow; else return ``{"overflows": 0, "bad_triangles": 0}``."""
+        stats = self.rt.to_host(self.trace_stats, np.int32, TRACE_STATS_LEN)
+        bad = 0
+        for i, rec in enumerate(self.meshes):
+            if rec.blas is not None:
+                n_bad = int(rec.blas.info()["n_bad"])
+                if n_bad:
+                    raise ValueError(f"mesh {i}: {n_bad} triangles have a NaN or infinite vertex "
+                                     "coordinate")
+                bad += n_bad
+        if stats[TRACE_STAT_OVERFLOW]:
+            raise ValueError(f"traversal stack overflowed {int(stats[TRACE_STAT_OVERFLOW])} "
+                             "times: hits may be missing")
+        return {"overflows": 0, "bad_triangles": bad}
