@@ -79,9 +79,20 @@ void lbm_reduce_partial(__global const float* restrict f, const LbmParams p,
     }
 }
 
+/* Raise tau to `raised` (capped) and count it as damping if it grew. */
+void lbm_guard_damp(__global LbmGuard* g, const float raised)
+{
+    const float t = fmin(LBM_TAU_RAISE_MAX, raised);
+    if (t > g->tau) {
+        g->tau = t;
+        g->damped += 1u;
+    }
+}
+
 /* Reduce the partials into the guard record and decide: non-finite cells -> restore the
- * checkpoint and raise tau; else save a checkpoint when asked (save: LBM_SAVE_*) and the interval
- * since the last check was clean (no clamps), and move tau back towards tau_user. */
+ * checkpoint and damp hard; clamps in the interval since the last check -> damp; a clean
+ * interval -> relax tau towards tau_user and save a checkpoint when asked (save: LBM_SAVE_*;
+ * LBM_SAVE_FORCE saves whatever the interval was). */
 __kernel __attribute__((reqd_work_group_size(LBM_REDUCE_WG, 1, 1)))
 void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
                       __global LbmGuard* g, const int save)
@@ -105,12 +116,7 @@ void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
     if (acc.nan_cells > 0u) {
         g->action = LBM_GUARD_RESTORE;
         g->restored += 1u;
-        const float raised = fmin(LBM_TAU_RAISE_MAX,
-                                  0.5f + fmax(2.0f * (g->tau - 0.5f), LBM_TAU_RAISE_MIN));
-        if (raised > g->tau) {
-            g->tau = raised;
-            g->damped += 1u;
-        }
+        lbm_guard_damp(g, 0.5f + fmax(2.0f * (g->tau - 0.5f), LBM_TAU_RAISE_MIN));
         /* the state is now the checkpoint's */
         g->mass = g->ckpt_mass;
         g->max_u2 = g->ckpt_max_u2;
@@ -122,7 +128,12 @@ void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
     g->max_u2 = acc.max_u2;
     g->max_fr2 = acc.max_fr2;
     g->min_h = acc.min_h;
-    if (clean) g->tau = g->tau_user + (g->tau - g->tau_user) * LBM_TAU_DECAY;
+    if (clean) {
+        g->tau = g->tau_user + (g->tau - g->tau_user) * LBM_TAU_DECAY;
+    } else if (save != LBM_SAVE_FORCE) {
+        const float excess = g->tau - 0.5f;
+        lbm_guard_damp(g, 0.5f + fmax(1.5f * excess, excess + LBM_TAU_STEP_MIN));
+    }
     if (save == LBM_SAVE_FORCE || (save == LBM_SAVE_IF_CLEAN && clean)) {
         g->action = LBM_GUARD_SAVE;
         g->saved += 1u;

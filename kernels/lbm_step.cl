@@ -63,8 +63,11 @@ float lbm_pull(__global const float* restrict f, __global const float* restrict 
     return fa;
 }
 
-/* Collision of nine streamed populations in place; returns the depth after the limiter and adds 1
- * to *clamped when the limiter acted (the cell is then set to its equilibrium, a local damping). */
+/* Collision of nine streamed populations in place; returns the depth after the limiter and sets
+ * *clamped when the limiter acted (the cell is then set to its equilibrium, a local damping).
+ * Delta form: each moving population gets d_a = omega (feq_a - f_a) + drag_a and the rest
+ * population -sum d_a, so the float32 rounding of the collision adds no mass on average and a
+ * state at its equilibrium is an exact fixed point. */
 float lbm_collide(float* f, const LbmParams p, const float omega, int* clamped)
 {
     float h, mx, my;
@@ -80,15 +83,17 @@ float lbm_collide(float* f, const LbmParams p, const float omega, int* clamped)
     lbm_equilibrium(h, ux, uy, p.g_lat, feq);
     /* Linear drag: momentum change dM = -drag * (mx, my), split as w_a c_a.dM (sum = dM). */
     const float dmx = -p.drag * mx, dmy = -p.drag * my;
-    f[0] += omega * (feq[0] - f[0]);
-    f[1] += omega * (feq[1] - f[1]) + LBM_W_AXIS * dmx;
-    f[5] += omega * (feq[5] - f[5]) - LBM_W_AXIS * dmx;
-    f[3] += omega * (feq[3] - f[3]) + LBM_W_AXIS * dmy;
-    f[7] += omega * (feq[7] - f[7]) - LBM_W_AXIS * dmy;
-    f[2] += omega * (feq[2] - f[2]) + LBM_W_DIAG * (dmx + dmy);
-    f[6] += omega * (feq[6] - f[6]) - LBM_W_DIAG * (dmx + dmy);
-    f[4] += omega * (feq[4] - f[4]) + LBM_W_DIAG * (dmy - dmx);
-    f[8] += omega * (feq[8] - f[8]) - LBM_W_DIAG * (dmy - dmx);
+    float d[9];
+    d[1] = omega * (feq[1] - f[1]) + LBM_W_AXIS * dmx;
+    d[5] = omega * (feq[5] - f[5]) - LBM_W_AXIS * dmx;
+    d[3] = omega * (feq[3] - f[3]) + LBM_W_AXIS * dmy;
+    d[7] = omega * (feq[7] - f[7]) - LBM_W_AXIS * dmy;
+    d[2] = omega * (feq[2] - f[2]) + LBM_W_DIAG * (dmx + dmy);
+    d[6] = omega * (feq[6] - f[6]) - LBM_W_DIAG * (dmx + dmy);
+    d[4] = omega * (feq[4] - f[4]) + LBM_W_DIAG * (dmy - dmx);
+    d[8] = omega * (feq[8] - f[8]) - LBM_W_DIAG * (dmy - dmx);
+    f[0] -= ((d[1] + d[5]) + (d[3] + d[7])) + ((d[2] + d[6]) + (d[4] + d[8]));
+    for (int a = 1; a < 9; ++a) f[a] += d[a];
     return h;
 }
 

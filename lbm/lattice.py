@@ -4,6 +4,8 @@ The lattice speed e = dx/dt is the one free choice. It is taken as small as the 
 LABSWE allow with margin, because a larger e means a smaller dt (more steps per second of water)
 and, at a fixed viscosity, tau = 1/2 + 3 nu / (e dx) closer to the unstable 1/2:
 
+* stability:   g H_d / e^2 <= GH_DESIGN (0.5). Measured: BGK D2Q9 LABSWE goes unstable in moving
+               water above g h / e^2 ~ 0.6 (docs/lbm.md); the limiter caps g h / e^2 at 0.6.
 * f0_eq >= 0:  5 g H_d / (6 e^2) + 2 u_d^2 / (3 e^2) <= F0_DESIGN (0.8, the bound is 1)
 * slow flow:   u_d / e <= SPEED_DESIGN (0.3; u^2/e^2 < 1 and Zhou's |u| < 0.3 e/sqrt(3) spirit)
 
@@ -19,8 +21,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+GH_DESIGN = 0.5
 F0_DESIGN = 0.8
 SPEED_DESIGN = 0.3
+#: kernels/lbm.h LBM_GH_LIMIT: the limiter's bound on g h / e^2.
+GH_LIMIT = 0.6
 #: kernels/lbm.h LBM_F0_LIMIT: the limiter's bound on 5Gh/6 + 2U^2/3.
 F0_LIMIT = 0.98
 DEFAULT_TAU = 0.6
@@ -125,16 +130,19 @@ def choose_lattice(dx: float, max_depth: float, max_speed: float, opts: Options)
     u_d = opts.expected_speed if opts.expected_speed is not None else 0.3 * math.sqrt(g * max_depth)
     u_d = max(u_d, max_speed)
     if opts.lattice_speed is None:
-        e = max(math.sqrt((5.0 * g * h_d / 6.0 + 2.0 * u_d**2 / 3.0) / F0_DESIGN),
+        e = max(math.sqrt(g * h_d / GH_DESIGN),
+                math.sqrt((5.0 * g * h_d / 6.0 + 2.0 * u_d**2 / 3.0) / F0_DESIGN),
                 u_d / SPEED_DESIGN)
     else:
         e = float(opts.lattice_speed)
-        need = math.sqrt((5.0 * g * max_depth / 6.0 + 2.0 * u_d**2 / 3.0) / F0_LIMIT)
-        if e < need or u_d / e > opts.max_speed_ratio:
+        need = max(math.sqrt(g * max_depth / GH_LIMIT),
+                   math.sqrt((5.0 * g * max_depth / 6.0 + 2.0 * u_d**2 / 3.0) / F0_LIMIT),
+                   u_d / opts.max_speed_ratio)
+        if e < need:
             raise ValueError(
                 f"option lattice_speed={e:g} m/s is too small for water {max_depth:g} m deep "
-                f"moving at {u_d:g} m/s; needs >= {max(need, u_d / opts.max_speed_ratio):.4g} "
-                "(f0_eq >= 0 and |u|/e <= max_speed_ratio)")
+                f"moving at {u_d:g} m/s; needs >= {need:.4g} (g h/e^2 <= {GH_LIMIT}, "
+                "f0_eq >= 0, |u|/e <= max_speed_ratio)")
     if opts.viscosity is None:
         tau = DEFAULT_TAU
     else:

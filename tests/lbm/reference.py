@@ -13,6 +13,7 @@ import numpy as np
 # Zhou's D2Q9: 0 rest, odd axes, even diagonals, counter-clockwise from +x.
 C = np.array([(0, 0), (1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)])
 F0_LIMIT = 0.98
+GH_LIMIT = 0.6
 
 
 def direction(cx: int, cy: int) -> int:
@@ -53,11 +54,15 @@ def macro(f, e):
 
 
 def limit(h, u, v, *, g, e, h_min, u_ratio_max, froude_max):
-    """The limiter's rules (docs/lbm.md): depth floor, speed cap (|u|/e and Froude), then lower
-    h until 5gh/(6e^2) + 2|u|^2/(3e^2) <= 0.98. Returns h, u, v and the mask of changed cells."""
+    """The limiter's rules (docs/lbm.md): depth in [h_min, 0.6 e^2/g], speed cap (|u|/e and
+    Froude), then lower h until 5gh/(6e^2) + 2|u|^2/(3e^2) <= 0.98. Returns h, u, v and the mask
+    of changed cells."""
     h, u, v = h.copy(), u.copy(), v.copy()
     hit = h < h_min
     h[hit] = h_min
+    deep = g * h / e**2 > GH_LIMIT
+    h[deep] = GH_LIMIT * e**2 / g
+    hit |= deep
     s2 = u * u + v * v
     cap = np.minimum((u_ratio_max * e) ** 2, froude_max**2 * g * h)
     fast = s2 > cap
