@@ -14,6 +14,7 @@ import sys
 #: imports light (no pyvista, no OpenCL context at import time).
 COMMANDS = [
     ("devices", "app.cmd_devices", "list OpenCL platforms and devices"),
+    ("render", "app.cmd_render", "render a scene file to a PNG (ray traced)"),
     ("bench", "app.bench", "benchmarks: lbm, bvh, render"),
 ]
 

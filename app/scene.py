@@ -201,3 +201,257 @@ def load_scene(path: str | Path) -> Scene:
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read scene file ({exc})") from None
     return parse_scene(text, path)
+
+
+# ---- renderer sections: [shading], [sky], [[lights]], [materials.NAME], [[meshes]], [pool] ------
+# Registered in SECTIONS; parsed values land in Scene.extra under the section name.
+
+SHADING_SCHEMA = {
+    "pattern": Field("str", "auto", choices=("auto", "center", "rgss", "jittered"),
+                     doc="samples in a pixel: auto = center for 1 spp, rgss for 4, else jittered"),
+    "order": Field("str", "tiles", choices=("tiles", "rows"), doc="primary ray order"),
+    "fresnel": Field("str", "exact", choices=("exact", "schlick"), doc="Fresnel reflectance"),
+    "tonemap": Field("str", "aces", choices=("clamp", "reinhard", "aces"), doc="tonemap curve"),
+    "exposure": Field("float", 1.0, lo=0.0, lo_open=True, hi=1e4, doc="radiance multiplier"),
+    "min_contribution": Field("float", 1e-3, lo=0.0, hi=0.5,
+                              doc="secondary rays below this share of a pixel are cut"),
+    "ambient": Field("vec3", (0.05, 0.05, 0.05), lo=0.0, hi=1e3, doc="ambient light, rgb"),
+    "seed": Field("int", 0, lo=0, hi=2**32 - 1, doc="jitter seed"),
+}
+
+SKY_SCHEMA = {
+    "kind": Field("str", "procedural", choices=("procedural", "cubemap"),
+                  doc="procedural gradient with sun, or six cubemap images"),
+    "zenith": Field("vec3", (0.25, 0.45, 0.85), lo=0.0, hi=1e4, doc="colour overhead, rgb"),
+    "horizon": Field("vec3", (0.75, 0.85, 0.95), lo=0.0, hi=1e4, doc="colour at the horizon"),
+    "ground": Field("vec3", (0.35, 0.33, 0.3), lo=0.0, hi=1e4, doc="colour below the horizon"),
+    "sun_direction": Field("vec3", (0.4, 0.8, 0.45), lo=-1e6, hi=1e6,
+                           doc="towards the sun (need not be unit)"),
+    "sun_color": Field("vec3", (30.0, 28.0, 24.0), lo=0.0, hi=1e6, doc="sun disk radiance"),
+    "sun_radius": Field("float", 0.6, lo=0.0, hi=45.0, unit="deg", doc="sun angular radius"),
+    "sun_glow": Field("float", 0.02, lo=0.0, hi=100.0, doc="halo strength around the sun"),
+    "cubemap": Field("table", None, doc="six image paths: px nx py ny pz nz"),
+}
+
+LIGHT_SCHEMA = {
+    "kind": Field("str", "directional", choices=("directional", "spot"), doc="light kind"),
+    "direction": Field("vec3", (-0.4, -0.8, -0.45), lo=-1e6, hi=1e6,
+                       doc="direction the light travels"),
+    "color": Field("vec3", (1.0, 1.0, 1.0), lo=0.0, hi=1e6,
+                   doc="irradiance (directional) or intensity (spot, falls off as 1/d^2)"),
+    "position": Field("vec3", (0.0, 0.0, 0.0), lo=-1e6, hi=1e6, unit="m", doc="spot position"),
+    "inner_angle": Field("float", 20.0, lo=0.0, hi=180.0, unit="deg", doc="spot full cone"),
+    "outer_angle": Field("float", 30.0, lo=0.0, hi=180.0, unit="deg", doc="spot edge"),
+}
+
+MATERIAL_SCHEMA = {
+    "diffuse": Field("vec3", (0.8, 0.8, 0.8), lo=0.0, hi=1.0, doc="albedo, linear rgb"),
+    "specular": Field("vec3", (0.0, 0.0, 0.0), lo=0.0, hi=10.0, doc="Phong specular colour"),
+    "shininess": Field("float", 32.0, lo=0.0, hi=1e4, doc="Phong exponent"),
+    "reflectivity": Field("float", 0.0, lo=0.0, hi=1.0, doc="opaque mirror fraction"),
+    "ior": Field("float", 0.0, lo=0.0, hi=4.0, doc="index of refraction; 0 = opaque"),
+    "absorption": Field("vec3", (0.0, 0.0, 0.0), lo=0.0, hi=1e4, unit="1/m",
+                        doc="Beer-Lambert coefficient inside a dielectric"),
+    "texture": Field("path", None, doc="image multiplying diffuse (sRGB PNG/JPEG)"),
+    "uv_scale": Field("vec2", (1.0, 1.0), lo=-1e6, hi=1e6, doc="texture repeats per uv unit"),
+}
+
+MESH_SCHEMA = {
+    "file": Field("str", doc="OBJ/PLY/STL file (relative to the scene, or in scenes/models)"),
+    "material": Field("str", "", doc="material name for the whole mesh ('' : MTL colours)"),
+    "materials": Field("table", None, doc="MTL material name -> scene material name"),
+    "position": Field("vec3", (0.0, 0.0, 0.0), lo=-1e6, hi=1e6, unit="m",
+                      doc="where the bottom centre of the bounding box goes (with size)"),
+    "rotation": Field("vec3", (0.0, 0.0, 0.0), lo=-360.0, hi=360.0, unit="deg",
+                      doc="rotation about x, then y, then z"),
+    "size": Field("float", 0.0, lo=0.0, hi=1e6, unit="m",
+                  doc="scale the largest extent to this; 0 keeps the file's units and origin"),
+    "smooth": Field("bool", True, doc="interpolate area-weighted vertex normals"),
+}
+
+POOL_SCHEMA = {
+    "wall_height": Field("float", 0.7, lo=0.0, lo_open=True, hi=1e4, unit="m",
+                         doc="wall top above the bed"),
+    "deck": Field("float", 1.0, lo=0.0, hi=1e4, unit="m", doc="width of the deck around it"),
+    "floor_texture": Field("path", None, doc="tile image on floor and walls"),
+    "tile_size": Field("float", 0.5, lo=0.0, lo_open=True, hi=1e4, unit="m",
+                       doc="one texture repeat"),
+    "floor_material": Field("str", "", doc="material of floor and walls ('' : tiles)"),
+    "deck_material": Field("str", "", doc="material of the deck ('' : stone)"),
+    "water_material": Field("str", "", doc="material of the water ('' : water, IOR 1.333)"),
+    "steps": Field("int", 30, lo=0, hi=100000, doc="LBM steps before a still render"),
+}
+
+CUBEMAP_FACES = ("px", "nx", "py", "ny", "pz", "nz")
+
+
+@dataclass(frozen=True)
+class ShadingSpec:
+    pattern: str
+    order: str
+    fresnel: str
+    tonemap: str
+    exposure: float
+    min_contribution: float
+    ambient: tuple
+    seed: int
+
+
+@dataclass(frozen=True)
+class SkySpec:
+    kind: str
+    zenith: tuple
+    horizon: tuple
+    ground: tuple
+    sun_direction: tuple
+    sun_color: tuple
+    sun_radius: float
+    sun_glow: float
+    cubemap: tuple  # six paths or ()
+
+
+@dataclass(frozen=True)
+class LightSpec:
+    kind: str
+    direction: tuple
+    color: tuple
+    position: tuple
+    inner_angle: float
+    outer_angle: float
+
+
+@dataclass(frozen=True)
+class MaterialSpec:
+    diffuse: tuple
+    specular: tuple
+    shininess: float
+    reflectivity: float
+    ior: float
+    absorption: tuple
+    texture: Path | None
+    uv_scale: tuple
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    file: Path
+    material: str
+    materials: dict
+    position: tuple
+    rotation: tuple
+    size: float
+    smooth: bool
+
+
+@dataclass(frozen=True)
+class PoolSpec:
+    wall_height: float
+    deck: float
+    floor_texture: Path | None
+    tile_size: float
+    floor_material: str
+    deck_material: str
+    water_material: str
+    steps: int
+
+
+def _shading(value, src: SourceText, base: Path) -> ShadingSpec:
+    return ShadingSpec(**validate_table(value, SHADING_SCHEMA, "shading", src, base))
+
+
+def _sky(value, src: SourceText, base: Path) -> SkySpec:
+    v = validate_table(value, SKY_SCHEMA, "sky", src, base)
+    if not any(v["sun_direction"]):
+        raise InputError(f"{src.where('sky', 'sun_direction')}: sun_direction must not be zero")
+    faces: tuple = ()
+    if v["kind"] == "cubemap":
+        if v["cubemap"] is None:
+            raise InputError(f"{src.where('sky', 'kind')}: kind = 'cubemap' needs "
+                             f"cubemap = {{{', '.join(f + ' = ...' for f in CUBEMAP_FACES)}}}")
+        schema = {f: Field("path", doc=f"cubemap face {f}") for f in CUBEMAP_FACES}
+        c = validate_table(v["cubemap"], schema, "sky.cubemap", src, base)
+        faces = tuple(c[f] for f in CUBEMAP_FACES)
+    v["cubemap"] = faces
+    return SkySpec(**v)
+
+
+def _lights(value, src: SourceText, base: Path) -> tuple:
+    if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+        raise InputError(f"{src.where('lights')}: use [[lights]] tables")
+    if len(value) > 8:
+        raise InputError(f"{src.where('lights')}: {len(value)} lights; at most 8")
+    out = []
+    for t in value:
+        v = validate_table(t, LIGHT_SCHEMA, "lights", src, base)
+        if not any(v["direction"]):
+            raise InputError(f"{src.where('lights', 'direction')}: direction must not be zero")
+        if v["inner_angle"] > v["outer_angle"]:
+            raise InputError(f"{src.where('lights', 'inner_angle')}: inner_angle "
+                             f"{v['inner_angle']:g} exceeds outer_angle {v['outer_angle']:g}")
+        out.append(LightSpec(**v))
+    return tuple(out)
+
+
+def _materials(value, src: SourceText, base: Path) -> dict:
+    if not isinstance(value, dict) or not all(isinstance(t, dict) for t in value.values()):
+        raise InputError(f"{src.where('materials')}: use [materials.NAME] tables")
+    out = {}
+    for name, t in value.items():
+        v = validate_table(t, MATERIAL_SCHEMA, f"materials.{name}", src, base)
+        if 0.0 < v["ior"] < 1.0:
+            raise InputError(f"{src.where(f'materials.{name}', 'ior')}: ior = {v['ior']:g}; "
+                             "use 0 (opaque) or a value in [1, 4]")
+        out[name] = MaterialSpec(**v)
+    return out
+
+
+def _find_model(name: str, base: Path, where: str) -> Path:
+    p = Path(name)
+    for cand in ([p] if p.is_absolute() else
+                 [base / p, Path(__file__).resolve().parent.parent / "scenes" / "models" / p]):
+        if cand.is_file():
+            return cand
+    raise InputError(f"{where}: file = {name!r}: not found beside the scene or in scenes/models")
+
+
+def _meshes(value, src: SourceText, base: Path) -> tuple:
+    if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+        raise InputError(f"{src.where('meshes')}: use [[meshes]] tables")
+    out = []
+    for t in value:
+        v = validate_table(t, MESH_SCHEMA, "meshes", src, base)
+        v["file"] = _find_model(v["file"], base, src.where("meshes", "file"))
+        mats = v["materials"] or {}
+        if not all(isinstance(x, str) for x in mats.values()):
+            raise InputError(f"{src.where('meshes', 'materials')}: values must be material names")
+        v["materials"] = dict(mats)
+        out.append(MeshSpec(**v))
+    return tuple(out)
+
+
+def _pool(value, src: SourceText, base: Path) -> PoolSpec:
+    return PoolSpec(**validate_table(value, POOL_SCHEMA, "pool", src, base))
+
+
+SECTIONS.update({"shading": _shading, "sky": _sky, "lights": _lights, "materials": _materials,
+                 "meshes": _meshes, "pool": _pool})
+
+
+def check_material_names(scene: Scene) -> None:
+    """Every material a mesh or the pool names exists (one-line InputError naming it)."""
+    known = set(scene.extra.get("materials", {}))
+    where = f"{scene.path}"
+    uses = []
+    for m in scene.extra.get("meshes", ()):
+        uses += [("meshes", "material", m.material)] if m.material else []
+        uses += [("meshes", "materials", x) for x in m.materials.values()]
+    pool = scene.extra.get("pool")
+    if pool is not None:
+        uses += [("pool", k, getattr(pool, k)) for k in
+                 ("floor_material", "deck_material", "water_material") if getattr(pool, k)]
+    for section, key, name in uses:
+        if name not in known:
+            raise InputError(f"{where}: [{section}] {key} names material {name!r}; defined: "
+                             f"{', '.join(sorted(known)) or 'none'}")
+    if pool is not None and scene.water is None:
+        raise InputError(f"{where}: [pool] needs a [water] section (the pool's size and depth)")
