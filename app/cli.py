@@ -15,6 +15,7 @@ import sys
 COMMANDS = [
     ("devices", "app.cmd_devices", "list OpenCL platforms and devices"),
     ("render", "app.cmd_render", "render a scene file to a PNG (ray traced)"),
+    ("simulate", "app.cmd_simulate", "run a scene's water (LBM) without rendering; save .npz"),
     ("bench", "app.bench", "benchmarks: lbm, bvh, render"),
 ]
 
