@@ -20,6 +20,7 @@ and are read on request (:meth:`Renderer.read_stats`, used by the benchmark).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -45,6 +46,10 @@ from raytrace.render_types import (
     SkyKind,
     Tonemap,
 )
+
+#: kernel id -> (id of the renderer that last bound it, its arguments); see Renderer._bind
+_BOUND: dict[int, tuple[int, list]] = {}
+_TOKENS = itertools.count()
 
 #: Device bytes per ray slot: input and output ray, hit record, radiance, child count/offset.
 BYTES_PER_RAY_SLOT = 2 * RAY.itemsize + HIT_DTYPE.itemsize + 16 + 4
@@ -134,6 +139,7 @@ class Renderer:
 
     def __init__(self, rt: Runtime, scene: RenderScene, settings: RenderSettings):
         self.rt, self.scene = rt, scene
+        self._token = next(_TOKENS)  # never reused, unlike id(self)
         self.settings = s = settings.resolved()
         order = PixelOrder.from_str(s.order)
         self.n_pixels = s.width * s.height
@@ -178,6 +184,20 @@ class Renderer:
         self.k_scatter = k("render_secondary.cl", "render_scatter")
         self.k_accumulate = k("render_frame.cl", "render_accumulate")
         self.k_tonemap = k("render_frame.cl", "render_tonemap")
+
+    def _bind(self, kernel, *args) -> None:
+        """Set only the arguments that changed since ``kernel`` was last bound, by this renderer
+        (kernel objects are shared per device; arguments are captured at enqueue time)."""
+        owner, prev = _BOUND.get(id(kernel), (None, None))
+        if owner != self._token:  # another renderer bound it since: set everything
+            prev = None
+        for i, a in enumerate(args):
+            if prev is not None and (prev[i] is a or (isinstance(a, np.generic)
+                                                      and type(prev[i]) is type(a)
+                                                      and prev[i] == a)):
+                continue
+            kernel.set_arg(i, a)
+        _BOUND[id(kernel)] = (self._token, list(args))
 
     # -- inputs -----------------------------------------------------------------------------
     def set_camera(self, eye, target, up=(0.0, 1.0, 0.0), fov: float = 60.0) -> None:
@@ -230,44 +250,46 @@ class Renderer:
         geom = self.scene.shade_args()
         lights = self.scene.light_buf
         has_lights = len(self.scene.lights) > 0
+        # no material reflects or refracts: no secondary wavefront can exist, launch none
+        bounces = s.bounces if self.scene.has_secondary else 0
         u32 = np.uint32
         for q0, nq in self.chunks:
             n_rays = nq * s.spp
-            self.k_raygen.set_args(self.camera_buf, u32(q0), u32(n_rays), self.rays[0],
+            self._bind(self.k_raygen, self.camera_buf, u32(q0), u32(n_rays), self.rays[0],
                                    self.counts)
             rt.launch("render.raygen", self.k_raygen, n_rays)
             cur, nxt = 0, 1
             launch_n = n_rays
-            for depth in range(s.bounces + 1):
+            for depth in range(bounces + 1):
                 d = u32(depth)
                 rays, hits = self.rays[cur], self.hits
-                self.k_trace.set_args(*scene_args, rays, self.counts, d, hits)
+                self._bind(self.k_trace, *scene_args, rays, self.counts, d, hits)
                 rt.launch("render.trace" if depth == 0 else "render.trace_secondary",
                           self.k_trace, launch_n, 64)
-                self.k_shade.set_args(*geom, self.params_buf, self.camera_buf, rays, hits,
+                self._bind(self.k_shade, *geom, self.params_buf, self.camera_buf, rays, hits,
                                       self.counts, d, self.radiance, self.child, self.aov,
                                       u32(s.aov))
                 rt.launch("render.shade", self.k_shade, launch_n, 64)
                 if has_lights:
-                    self.k_shadow.set_args(*scene_args, *geom, self.params_buf, lights, rays,
+                    self._bind(self.k_shadow, *scene_args, *geom, self.params_buf, lights, rays,
                                            hits, self.counts, d, self.radiance)
                     rt.launch("render.shadow", self.k_shadow, launch_n, 64)
-                if depth < s.bounces:
+                if depth < bounces:
                     n_blocks = -(-launch_n // SCAN_BLOCK)
-                    self.k_scan_blocks.set_args(self.child, self.counts, d, self.block_sums)
+                    self._bind(self.k_scan_blocks, self.child, self.counts, d, self.block_sums)
                     rt.launch("render.secondary", self.k_scan_blocks, n_blocks * SCAN_WG, SCAN_WG)
-                    self.k_scan_sums.set_args(self.block_sums, u32(n_blocks), self.counts, d,
+                    self._bind(self.k_scan_sums, self.block_sums, u32(n_blocks), self.counts, d,
                                               u32(self.capacity), self.stats)
                     rt.launch("render.secondary", self.k_scan_sums, SCAN_WG, SCAN_WG)
-                    self.k_scatter.set_args(*geom, self.params_buf, rays, hits, self.counts, d,
+                    self._bind(self.k_scatter, *geom, self.params_buf, rays, hits, self.counts, d,
                                             self.child, self.block_sums, self.rays[nxt])
                     rt.launch("render.secondary", self.k_scatter, launch_n, 64)
-                self.k_accumulate.set_args(self.camera_buf, u32(q0), u32(nq), rays,
+                self._bind(self.k_accumulate, self.camera_buf, u32(q0), u32(nq), rays,
                                            self.radiance, self.counts, d, self.framebuffer)
                 rt.launch("render.accumulate", self.k_accumulate, nq, 64)
                 cur, nxt = nxt, cur
                 launch_n = min(self.capacity, 2 * launch_n)
-        self.k_tonemap.set_args(self.framebuffer, u32(self.n_pixels), self.params_buf, self.rgba)
+        self._bind(self.k_tonemap, self.framebuffer, u32(self.n_pixels), self.params_buf, self.rgba)
         rt.launch("render.tonemap", self.k_tonemap, self.n_pixels, 64)
 
     # -- outputs (each one synchronises) ------------------------------------------------------
@@ -301,7 +323,7 @@ class Renderer:
         """Rays traced per depth over the last frame and children dropped (wavefront full)."""
         st = self.rt.to_host(self.stats, np.uint32, STATS_LEN)
         per_depth = [int(x) for x in st[: self.settings.bounces + 1]]
-        if self.settings.bounces == 0:  # no scan ran: the primary count is the chunks' sum
+        if self.settings.bounces == 0 or not self.scene.has_secondary:  # no scan ran
             per_depth = [sum(nq * self.settings.spp for _, nq in self.chunks)]
         return {"rays_per_depth": per_depth, "dropped": int(st[STAT_DROPPED]),
                 "secondary_rays": int(sum(per_depth[1:]))}

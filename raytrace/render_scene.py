@@ -262,6 +262,11 @@ class RenderScene:
         return any(m.ior > 0 for m in self.materials)
 
     @property
+    def has_secondary(self) -> bool:
+        """Whether any material spawns reflection or refraction rays."""
+        return any(m.ior > 0 or m.reflectivity > 0 for m in self.materials)
+
+    @property
     def n_triangles(self) -> int:
         return sum(m["n_triangles"] for m in self.meshes)
 
