@@ -7,6 +7,9 @@ import importlib
 
 #: (name, module, help); each module exposes add_arguments(parser) and run(args).
 BENCHES = [
+    ("render", "app.bench_render", "renderer: the seed's scenes per stage, FPS, error vs spp"),
+    ("bvh", "app.bench_bvh", "GPU BVH build/refit/TLAS ms and ray rates vs NVIDIA Warp"),
+    ("lbm", "app.bench_lbm", "LBM step: MLUPs/s and share of the measured copy bandwidth"),
 ]
 
 

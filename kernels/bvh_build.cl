@@ -62,10 +62,11 @@ __kernel void bvh_tri_morton(__global const float4* restrict verts,
     if (t >= n_tris) return;
     float3 lo, ext;
     morton_frame(infos + info_index, &lo, &ext);
+    uint4 masks = morton_masks(ext, key_bits);
     float4 a, b, c;
     load_triangle(verts, tris, nv, t, &a, &b, &c);
     float3 m = (a.xyz + b.xyz + c.xyz) * (1.0f / 3.0f);
-    keys[t] = morton_isotropic(m, lo, ext, key_bits);
+    keys[t] = morton_isotropic(m, lo, ext, masks);
     vals[t] = t;
 }
 

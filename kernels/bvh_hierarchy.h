@@ -10,52 +10,63 @@
    exact enough that neighbouring cells are ordered correctly. */
 #define MORTON_MAX_AXIS_BITS 21
 
-/* Morton code with one scale for all axes ("isotropic"): each of the key_bits bits, from the top,
-   halves the axis whose cells are currently the longest (ties go to x, then y, then z). A flat
-   height field therefore spends its first bits on its two long axes and only a few on its thin
-   one, and the cells stay near-cubic; a cube gets the classic x,y,z interleave. Every thread
-   derives the same schedule from the same bounds. NaN centroids get code 0. */
-inline uint morton_isotropic(float3 c, float3 lo, float3 ext, int key_bits) {
-    float cell[3] = {ext.x, ext.y, ext.z};
-    int nb[3] = {0, 0, 0};
-    uint axis_lo = 0, axis_hi = 0; /* 2 bits per key bit: which axis supplies it */
-    int used = 0;
-    for (; used < key_bits; ++used) {
-        int a = -1;
-        float best = 0.0f;
-        for (int k = 0; k < 3; ++k) {
-            if (nb[k] < MORTON_MAX_AXIS_BITS && cell[k] > best) {
-                best = cell[k];
-                a = k;
-            }
-        }
-        if (a < 0) break; /* every axis is flat or exhausted: the remaining bits stay 0 */
-        cell[a] *= 0.5f;
-        nb[a] += 1;
-        if (used < 16) axis_lo |= (uint)a << (2 * used);
-        else axis_hi |= (uint)a << (2 * (used - 16));
-    }
-    float cc[3] = {c.x - lo.x, c.y - lo.y, c.z - lo.z};
-    float ee[3] = {ext.x, ext.y, ext.z};
-    uint q[3];
-    for (int k = 0; k < 3; ++k) {
-        q[k] = 0;
-        if (nb[k] > 0) {
-            float cells = (float)(1u << nb[k]);
-            float f = cc[k] / ee[k] * cells;
-            f = isnan(f) ? 0.0f : clamp(f, 0.0f, cells - 1.0f);
-            q[k] = (uint)f;
+/* Which key bits each axis supplies, for one scale on all axes ("isotropic"): each key bit, from
+   the top, halves the axis whose cells are currently the longest (ties go to x, then y, then z).
+   A flat height field therefore spends its first bits on its two long axes and only a few on its
+   thin one, and the cells stay near-cubic; a cube gets the classic x,y,z interleave. Returns the
+   three bit masks (xyz) and the number of bits used (w). All in registers: every thread derives
+   the same masks from the same bounds, which costs less than a launch to share them. */
+inline uint4 morton_masks(float3 ext, int key_bits) {
+    float cx = ext.x, cy = ext.y, cz = ext.z;
+    int nx = 0, ny = 0, nz = 0;
+    uint mx = 0, my = 0, mz = 0;
+    int b = key_bits - 1;
+    for (; b >= 0; --b) {
+        float vx = nx < MORTON_MAX_AXIS_BITS ? cx : 0.0f;
+        float vy = ny < MORTON_MAX_AXIS_BITS ? cy : 0.0f;
+        float vz = nz < MORTON_MAX_AXIS_BITS ? cz : 0.0f;
+        if (!(vx > 0.0f || vy > 0.0f || vz > 0.0f)) break; /* flat or exhausted: bits stay 0 */
+        if (vx >= vy && vx >= vz) {
+            mx |= 1u << b;
+            cx *= 0.5f;
+            nx += 1;
+        } else if (vy >= vz) {
+            my |= 1u << b;
+            cy *= 0.5f;
+            ny += 1;
+        } else {
+            mz |= 1u << b;
+            cz *= 0.5f;
+            nz += 1;
         }
     }
+    return (uint4)(mx, my, mz, (uint)(key_bits - 1 - b));
+}
+
+/* Software bit deposit: the low bits of q go, in order, to the set bits of mask. */
+inline uint deposit_bits(uint q, uint mask) {
+    uint r = 0;
+    for (uint m = mask; m != 0u; m &= m - 1u) {
+        if (q & 1u) r |= m & (~m + 1u);
+        q >>= 1;
+    }
+    return r;
+}
+
+inline uint morton_quantize(float c, float lo, float ext, uint mask) {
+    float cells = (float)(1u << popcount(mask));
+    float f = (c - lo) / ext * cells;
+    f = isnan(f) ? 0.0f : clamp(f, 0.0f, cells - 1.0f);
+    return (uint)f;
+}
+
+/* Morton key of centroid c in the frame (lo, ext) with the masks of morton_masks. NaN -> 0. */
+inline uint morton_isotropic(float3 c, float3 lo, float3 ext, uint4 masks) {
     uint key = 0;
-    int taken[3] = {0, 0, 0};
-    for (int b = 0; b < used; ++b) {
-        uint a = b < 16 ? (axis_lo >> (2 * b)) & 3u : (axis_hi >> (2 * (b - 16))) & 3u;
-        int sh = nb[a] - 1 - taken[a];
-        taken[a] += 1;
-        key = (key << 1) | ((q[a] >> sh) & 1u);
-    }
-    return key << (key_bits - used);
+    if (masks.x) key |= deposit_bits(morton_quantize(c.x, lo.x, ext.x, masks.x), masks.x);
+    if (masks.y) key |= deposit_bits(morton_quantize(c.y, lo.y, ext.y, masks.y), masks.y);
+    if (masks.z) key |= deposit_bits(morton_quantize(c.z, lo.z, ext.z, masks.z), masks.z);
+    return key;
 }
 
 /* Morton bounds of a BVH from its header (set by the bounds pass). */

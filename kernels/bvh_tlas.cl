@@ -64,8 +64,9 @@ __kernel void bvh_box_morton(int n, __global const float4* restrict boxes,
     if (i >= n) return;
     float3 lo, ext;
     morton_frame(info, &lo, &ext);
+    uint4 masks = morton_masks(ext, key_bits);
     float3 c = 0.5f * (boxes[2 * i].xyz + boxes[2 * i + 1].xyz);
-    keys[i] = morton_isotropic(c, lo, ext, key_bits);
+    keys[i] = morton_isotropic(c, lo, ext, masks);
     vals[i] = i;
 }
 

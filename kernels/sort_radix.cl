@@ -16,7 +16,9 @@
 #define RADIX_BITS 4
 #define RADIX (1 << RADIX_BITS)
 #define RADIX_TILE (RADIX_WG * RADIX_ITEMS)
+#ifndef SCAN_WG
 #define SCAN_WG 256
+#endif
 
 /* Per-thread digit counts packed 4 bits per digit (RADIX_ITEMS <= 15) in a ulong. */
 inline uint packed_count(ulong packed, uint d) {

@@ -78,7 +78,9 @@ class RadixSorter:
         self._alt_keys = rt.buffer(4 * self.n)
         self._alt_vals = rt.buffer(4 * self.n)
         self._counts = rt.buffer(4 * (1 << RADIX_BITS) * self.n_tiles)
-        prg = rt.program("sort_radix.cl")
+        # one work-group scans all tile counts: as wide as the device allows on a GPU
+        self.scan_wg = SCAN_WG if not rt.is_gpu else min(1024, rt.device.max_work_group_size)
+        prg = rt.program("sort_radix.cl", {"SCAN_WG": self.scan_wg})
         self._scan = cl.Kernel(prg, "radix_scan")
         self._scan.set_args(np.uint32((1 << RADIX_BITS) * self.n_tiles), self._counts)
         self._passes = []
@@ -101,7 +103,7 @@ class RadixSorter:
         rt, gs = self.rt, self.n_tiles * RADIX_WG
         for hist, scat in self._passes:
             rt.launch(self.stage, hist, gs, RADIX_WG)
-            rt.launch(self.stage, self._scan, SCAN_WG, SCAN_WG)
+            rt.launch(self.stage, self._scan, self.scan_wg, self.scan_wg)
             rt.launch(self.stage, scat, gs, RADIX_WG)
         if self._result_in_alt:
             for a, b in ((self._alt_keys, self.keys), (self._alt_vals, self.vals)):
