@@ -269,12 +269,25 @@ class ShallowWater:
             return tuple(self.options.local_size)
         return (128, 1) if self.rt.is_gpu else None
 
-    def _enqueue_step(self) -> None:
+    def _enqueue_step(self) -> cl.Event:
         k = self._k_step_pair[self._parity]
-        self.rt.launch("lbm.step", k, (self.nx, self.ny), self._local_size())
+        evt = self.rt.launch("lbm.step", k, (self.nx, self.ny), self._local_size())
         self._f.swap()
         self._h.swap()
         self._parity ^= 1
+        return evt
+
+    def enqueue_steps(self, n: int) -> list[cl.Event]:
+        """``n`` bare fused steps, no rain and no guard check, returning their events: for
+        benchmarks timing a chain of launches. A frame calls :meth:`step`."""
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+            raise ValueError(f"enqueue_steps: n={n!r} must be an integer >= 1")
+        events = [self._enqueue_step() for _ in range(int(n))]
+        self.time += n * self.dt
+        self.steps += n
+        self._since_check += n
+        self._since_save += n
+        return events
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` time steps (``n * dt`` seconds): n fused collide+stream launches, the

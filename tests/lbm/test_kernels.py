@@ -7,8 +7,8 @@ import pytest
 
 import lbm
 from kernels.layout import check_struct
+from lbm import reference as ref
 from lbm.structs import STRUCTS
-from tests.lbm import reference as ref
 
 NX, NY, DX = 13, 9, 0.05
 
