@@ -233,7 +233,8 @@ class Renderer:
         p["tonemap"] = int(Tonemap.from_str(s.tonemap))
         p["max_depth"] = s.bounces
         p["capacity"] = self.capacity
-        p["min_weight"] = s.min_weight
+        # the cut-off is a share of the pixel: a ray of weight w stands for w * spp of a sample
+        p["min_weight"] = s.min_weight / s.spp
         return p
 
     # -- the frame ----------------------------------------------------------------------------
