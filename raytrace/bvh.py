@@ -19,7 +19,7 @@ import numpy as np
 import pyopencl as cl
 
 from kernels.runtime import Runtime
-from raytrace.sort import SortMethod, make_sorter
+from raytrace.sort import Launch, SortMethod, make_sorter
 
 _F4 = (np.float32, 4)
 NODE_DTYPE = np.dtype([("lo_l", _F4), ("hi_l", _F4), ("lo_r", _F4), ("hi_r", _F4)])
@@ -33,7 +33,7 @@ HIT_DTYPE = np.dtype([("t", np.float32), ("u", np.float32), ("v", np.float32),
                       ("prim", np.int32), ("inst", np.int32)])
 
 BOUNDS_WG = 256
-DEFAULT_LEAF_SIZE = 4
+DEFAULT_LEAF_SIZE = 2
 DEFAULT_KEY_BITS = 32
 #: Leaf sizes are capped: a leaf is tested triangle by triangle, and 4 bits is plenty.
 MAX_LEAF_SIZE = 15
@@ -167,7 +167,14 @@ class Blas:
                          np.int32(s.node_base), np.int32(s.tri_base), self.keys, s.tris, s.nodes,
                          self.flags, s.infos, idx)
         groups = min(-(-self.n_triangles // BOUNDS_WG), 4 * self.rt.device.max_compute_units * 8)
-        self._bounds_size = max(groups, 1) * BOUNDS_WG
+        rt, st, nt = self.rt, self.stage, self.n_triangles
+        self._reset_build = Launch(rt, f"{st}.reset", self._k_reset_build, 1)
+        self._reset_refit = Launch(rt, f"{st}.reset", self._k_reset_refit, 1)
+        self._bounds = Launch(rt, f"{st}.bounds", self._k_bounds, max(groups, 1) * BOUNDS_WG,
+                              BOUNDS_WG)
+        self._morton = Launch(rt, f"{st}.morton", self._k_morton, nt, 64)
+        self._gather = Launch(rt, f"{st}.gather", self._k_gather, nt, 64)
+        self._hier = Launch(rt, f"{st}.hierarchy", self._k_hier, nt, 64)
 
     # -- device work (enqueue only) -----------------------------------------------------------
     def rebuild(self) -> None:
@@ -176,10 +183,10 @@ class Blas:
         Use after the first upload, when the topology changes, or when refits have degraded the
         tree (large motion). Costs a sort: several times a refit.
         """
-        rt, st, n = self.rt, self.stage, self.n_triangles
-        rt.launch(f"{st}.reset", self._k_reset_build, 1)
-        rt.launch(f"{st}.bounds", self._k_bounds, self._bounds_size, BOUNDS_WG)
-        rt.launch(f"{st}.morton", self._k_morton, n)
+        self._reset_build()
+        self._bounds()
+        self._morton()
+        self.rt.queue.flush()  # let the device start while the sort is being enqueued
         self._sorter.enqueue()
         self._enqueue_gather_and_hierarchy()
         self.built = True
@@ -194,13 +201,12 @@ class Blas:
         if not self.built:
             self.rebuild()
             return
-        self.rt.launch(f"{self.stage}.reset", self._k_reset_refit, 1)
+        self._reset_refit()
         self._enqueue_gather_and_hierarchy()
 
     def _enqueue_gather_and_hierarchy(self) -> None:
-        rt, st, n = self.rt, self.stage, self.n_triangles
-        rt.launch(f"{st}.gather", self._k_gather, n)
-        rt.launch(f"{st}.hierarchy", self._k_hier, n)
+        self._gather()
+        self._hier()
 
     # -- host inspection (synchronises; not for the frame loop) -------------------------------
     def info(self) -> np.void:

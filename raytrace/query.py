@@ -121,15 +121,15 @@ def intersect_reference(vertices, triangles, origins, directions, tmin=0.0, tmax
         oo, dd = o[s:s + chunk, None, :], d[s:s + chunk, None, :]
         pv = np.cross(dd, e2[None])
         det = (e1[None] * pv).sum(-1)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             inv = 1.0 / det
             tv = oo - p0[None]
             u = (tv * pv).sum(-1) * inv
             q = np.cross(tv, e1[None])
             w = (dd * q).sum(-1) * inv
             t = (e2[None] * q).sum(-1) * inv
-        ok = ((det != 0) & (u >= 0) & (w >= 0) & (u + w <= 1)
-              & (t >= lo[s:s + chunk, None]) & (t < hi[s:s + chunk, None]))
+            ok = ((det != 0) & (u >= 0) & (w >= 0) & (u + w <= 1)
+                  & (t >= lo[s:s + chunk, None]) & (t < hi[s:s + chunk, None]))
         t = np.where(ok, t, np.inf)
         j = np.argmin(t, axis=1)
         rows = np.arange(len(j))

@@ -28,7 +28,7 @@ from raytrace.bvh import (
     node_count,
     vertices_to_float4,
 )
-from raytrace.sort import make_sorter
+from raytrace.sort import Launch, make_sorter
 
 TLAS_LEAF_SIZE = 1
 TRACE_STATS_LEN = 4
@@ -97,7 +97,7 @@ class Scene:
         self.tlas_info = rt.buffer(INFO_DTYPE.itemsize)
         self._k_reset = cl.Kernel(rt.program("bvh_build.cl"), "bvh_reset_info")
         self._k_reset.set_args(self.tlas_info, np.int32(0), np.int32(0), np.int32(0))
-        self._k_reset.set_arg(2, np.int32(0))
+        self._reset = Launch(rt, f"{stage}.tlas.reset", self._k_reset, 1)
         self._init_empty_tlas()
 
     # -- content ---------------------------------------------------------------------------
@@ -243,13 +243,18 @@ class Scene:
                               self._tlas_flags, self.tlas_info)
         self._tlas_sorter = make_sorter(rt, self._tlas_keys, self.tlas_prims, n,
                                         stage=f"{self.stage}.tlas.sort")
+        st = f"{self.stage}.tlas"
+        self._prep = Launch(rt, f"{st}.prep", self._k_prep, n, BOUNDS_WG)
+        self._morton = Launch(rt, f"{st}.morton", self._k_morton, n, 64)
+        self._hier = Launch(rt, f"{st}.hierarchy", self._k_hier, n, 64)
         self._tlas_n = n
         self._xforms_dirty = True
 
     def _build_tlas(self) -> None:
         rt, n, st = self.rt, self.n_instances, f"{self.stage}.tlas"
-        self._k_reset.set_arg(2, np.int32(n))
-        rt.launch(f"{st}.reset", self._k_reset, 1)  # root = -1: an empty scene misses
+        if n != self._tlas_n:
+            self._k_reset.set_arg(2, np.int32(n))
+        self._reset()  # root = -1: an empty scene misses
         if n == 0:
             return
         if n != self._tlas_n:
@@ -260,10 +265,10 @@ class Scene:
                                   is_blocking=False)
             rt.record(f"{st}.upload", evt)
             self._xforms_dirty = False
-        rt.launch(f"{st}.prep", self._k_prep, -(-n // BOUNDS_WG) * BOUNDS_WG, BOUNDS_WG)
-        rt.launch(f"{st}.morton", self._k_morton, n)
+        self._prep()
+        self._morton()
         self._tlas_sorter.enqueue()
-        rt.launch(f"{st}.hierarchy", self._k_hier, n)
+        self._hier()
 
     # -- kernels' view ----------------------------------------------------------------------
     def trace_args(self) -> list:

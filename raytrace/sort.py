@@ -1,7 +1,8 @@
 """Device sorts of (uint32 key, uint32 value) pairs for the LBVH builder.
 
 * :class:`RadixSorter`: least-significant-digit radix sort, 4 bits per pass, three launches per
-  pass (``kernels/sort_radix.cl``), scratch allocated once. Measured against
+  pass, two when the input has at most 256 tiles (``kernels/sort_radix.cl``), scratch allocated
+  once. Measured against
   ``pyopencl.algorithm.RadixSort`` by ``lbwater bench bvh`` (see BENCHMARKS.md).
 * :class:`LocalSorter`: one work-group bitonic sort in local memory for n <= 2048 (one launch),
   used for the TLAS and small meshes.
@@ -26,6 +27,33 @@ RADIX_TILE = RADIX_WG * RADIX_ITEMS
 SCAN_WG = 256
 LOCAL_MAX = 2048
 LOCAL_WG = 256
+#: Up to this many tiles the scatter sums the tile counts itself (no scan launch).
+FUSED_SCAN_MAX_TILES = 256
+
+
+class Launch:
+    """One launch prepared once: a kernel with its arguments bound, its sizes and its stage name.
+
+    Calling it enqueues the kernel and records the event under the stage in ``rt.timer`` (the
+    contract of ``Runtime.launch`` without its per-call size conversions: a BVH build is some
+    twenty launches, and at small sizes their host cost is what the wall clock shows).
+    """
+
+    __slots__ = ("rt", "stage", "kernel", "global_size", "local_size")
+
+    def __init__(self, rt: Runtime, stage: str, kernel: cl.Kernel, global_size: int,
+                 local_size: int | None = None):
+        self.rt, self.stage, self.kernel = rt, stage, kernel
+        gs = max(int(global_size), 1)
+        if local_size is not None:
+            gs = -(-gs // int(local_size)) * int(local_size)
+        self.global_size = (gs,)
+        self.local_size = None if local_size is None else (int(local_size),)
+
+    def __call__(self, wait_for=None) -> cl.Event:
+        evt = cl.enqueue_nd_range_kernel(self.rt.queue, self.kernel, self.global_size,
+                                         self.local_size, wait_for=wait_for)
+        return self.rt.timer.record(self.stage, evt)
 
 
 class SortMethod(enum.IntEnum):
@@ -52,12 +80,13 @@ class LocalSorter:
         if not 0 <= n <= LOCAL_MAX:
             raise ValueError(f"LocalSorter sorts at most {LOCAL_MAX} pairs, got n={n}")
         self.rt, self.n, self.stage = rt, int(n), stage
-        self._k = cl.Kernel(rt.program("sort_local.cl"), "sort_local_pairs")
-        self._k.set_args(np.uint32(n), keys, vals)
+        k = cl.Kernel(rt.program("sort_local.cl"), "sort_local_pairs")
+        k.set_args(np.uint32(n), keys, vals)
+        self._launch = Launch(rt, stage, k, LOCAL_WG, LOCAL_WG)
 
     def enqueue(self) -> None:
         if self.n > 1:
-            self.rt.launch(self.stage, self._k, LOCAL_WG, LOCAL_WG)
+            self._launch()
 
 
 class RadixSorter:
@@ -81,9 +110,12 @@ class RadixSorter:
         # one work-group scans all tile counts: as wide as the device allows on a GPU
         self.scan_wg = SCAN_WG if not rt.is_gpu else min(1024, rt.device.max_work_group_size)
         prg = rt.program("sort_radix.cl", {"SCAN_WG": self.scan_wg})
-        self._scan = cl.Kernel(prg, "radix_scan")
-        self._scan.set_args(np.uint32((1 << RADIX_BITS) * self.n_tiles), self._counts)
+        self.fused_scan = self.n_tiles <= FUSED_SCAN_MAX_TILES
+        scan = cl.Kernel(prg, "radix_scan")
+        scan.set_args(np.uint32((1 << RADIX_BITS) * self.n_tiles), self._counts)
+        self._scan = Launch(rt, stage, scan, self.scan_wg, self.scan_wg)
         self._passes = []
+        gs = self.n_tiles * RADIX_WG
         src = (keys, vals)
         dst = (self._alt_keys, self._alt_vals)
         for p in range(self.passes):
@@ -92,19 +124,21 @@ class RadixSorter:
             hist.set_args(np.uint32(self.n), shift, src[0], self._counts, np.uint32(self.n_tiles))
             scat = cl.Kernel(prg, "radix_scatter")
             scat.set_args(np.uint32(self.n), shift, src[0], src[1], dst[0], dst[1], self._counts,
-                          np.uint32(self.n_tiles))
-            self._passes.append((hist, scat))
+                          np.uint32(self.n_tiles), np.uint32(self.fused_scan))
+            self._passes.append((Launch(rt, stage, hist, gs, RADIX_WG),
+                                 Launch(rt, stage, scat, gs, RADIX_WG)))
             src, dst = dst, src
         self._result_in_alt = self.passes % 2 == 1
 
     def enqueue(self) -> None:
         if self.n <= 1:
             return
-        rt, gs = self.rt, self.n_tiles * RADIX_WG
+        rt = self.rt
         for hist, scat in self._passes:
-            rt.launch(self.stage, hist, gs, RADIX_WG)
-            rt.launch(self.stage, self._scan, self.scan_wg, self.scan_wg)
-            rt.launch(self.stage, scat, gs, RADIX_WG)
+            hist()
+            if not self.fused_scan:
+                self._scan()
+            scat()
         if self._result_in_alt:
             for a, b in ((self._alt_keys, self.keys), (self._alt_vals, self.vals)):
                 rt.record(self.stage, cl.enqueue_copy(rt.queue, b, a, byte_count=4 * self.n))
