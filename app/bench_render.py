@@ -50,6 +50,8 @@ def add_arguments(p) -> None:
     p.add_argument("--convergence-size", type=int, nargs=2, default=[192, 108])
     p.add_argument("--spp", type=int, nargs="+", default=[1, 2, 4, 8, 16, 32, 64])
     p.add_argument("--reference-spp", type=int, default=256)
+    p.add_argument("--local-sizes", type=int, nargs="+", default=[64, 128, 256],
+                   help="work-group sizes tried; the table reports the fastest")
 
 
 def _frame_times(rt, renderer, repeats: int, warmup: int) -> tuple[dict, float]:
@@ -67,6 +69,16 @@ def _frame_times(rt, renderer, repeats: int, warmup: int) -> tuple[dict, float]:
         for k, v in rt.timer.collect().items():
             stages.setdefault(k, []).append(v)
     return {k: statistics.median(v) for k, v in stages.items()}, statistics.median(walls)
+
+
+def _with_local_size(rt, rs, renderer, ls: int):
+    import dataclasses
+
+    from raytrace.render import Renderer
+
+    r = Renderer(rt, rs, dataclasses.replace(renderer.settings, local_size=ls))
+    r.set_camera_record(renderer.camera)
+    return r
 
 
 def _build(scene_name: str, rt, size, **kw):
@@ -114,9 +126,15 @@ def run(args) -> int:
         for size in args.sizes:
             rs, renderer, _ = _build(name, rt, (size, size))
             rs.update()
-            renderer.enqueue_frame(update_scene=False)
-            rt.finish()
-            stages, wall = _frame_times(rt, renderer, args.repeats, args.warmup)
+            by_ls = {}
+            for ls in args.local_sizes:  # the same scene, each work-group size
+                r_ls = renderer if ls == renderer.settings.local_size else _with_local_size(
+                    rt, rs, renderer, ls)
+                r_ls.enqueue_frame(update_scene=False)
+                rt.finish()
+                by_ls[ls] = (*_frame_times(rt, r_ls, args.repeats, args.warmup), r_ls)
+            best = min(by_ls, key=lambda k: by_ls[k][1])
+            stages, wall, renderer = by_ls[best]
             stats = renderer.read_stats()
             fb = renderer.read_framebuffer()
             if not np.isfinite(fb).all():
@@ -127,7 +145,9 @@ def run(args) -> int:
             seed = SEED_MS[name][0 if size == 512 else 1] if size in (512, 1024) else None
             gpu_total = sum(stages.values())
             row = {"scene": name, "size": size, "triangles": rs.n_triangles,
-                   "bounces": renderer.settings.bounces}
+                   "bounces": renderer.settings.bounces, "levels": stats["levels"],
+                   "local_size": best,
+                   "wall_ms_by_local_size": {k: round(v[1], 4) for k, v in by_ls.items()}}
             for col, names in COLUMNS.items():
                 row[f"{col}_ms"] = round(sum(stages.get(n, 0.0) for n in names), 4)
             row |= {"kernel_total_ms": round(gpu_total, 4), "wall_ms": round(wall, 4),
@@ -150,7 +170,8 @@ def run(args) -> int:
             "repeats": args.repeats, "warmup": args.warmup,
             "seed_bytes_per_ray": SEED_BYTES_PER_RAY}
     write_json(out / "render.json", {"meta": meta, "scenes": rows, "convergence": conv})
-    write_csv(out / "render.csv", [{k: v for k, v in r.items() if k != "stages_ms"}
+    write_csv(out / "render.csv", [{k: v for k, v in r.items()
+                                    if k not in ("stages_ms", "wall_ms_by_local_size")}
                                    for r in rows])
     if conv:
         write_csv(out / "render_convergence.csv", conv)

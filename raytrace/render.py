@@ -5,7 +5,7 @@ the device-side ray count decides who works). For each chunk of pixels (the whol
 the ray buffers would not fit in device memory):
 
     render.raygen      primary rays, 8x8 tiles in Morton order, spp per pixel, weight 1/spp
-    per depth 0..bounces:
+    per depth 0..levels (levels: bounces, or as many as the last frame needed):
       render.trace     closest hit (render.trace_secondary for depth >= 1)
       render.shade     ambient, sky on a miss, Beer-Lambert, child counts, primary AOVs
       render.shadow    shadow rays and Phong direct light per light
@@ -72,6 +72,8 @@ class RenderSettings:
     memory_fraction: float = 0.25  #: most of the device memory the ray buffers may take
     max_chunk_rays: int | None = None  #: cap on primary rays per chunk (tests of the tiling)
     aov: bool = False             #: write primary depth/normal/prim/inst per pixel
+    adaptive_depth: bool = True   #: launch only as many levels as the last frame needed
+    local_size: int = 64          #: work-group size of the per-ray and per-pixel stages
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -84,6 +86,8 @@ class RenderSettings:
             raise ValueError(f"render exposure must be > 0, got {self.exposure}")
         if not 0 <= self.min_weight < 1:
             raise ValueError(f"render min_weight must lie in [0, 1), got {self.min_weight}")
+        if self.local_size not in (32, 64, 128, 256, 512):
+            raise ValueError(f"local_size must be 32, 64, 128, 256 or 512, got {self.local_size}")
         if not 1.0 <= self.capacity_factor <= 64:
             raise ValueError(f"capacity_factor must lie in [1, 64], got {self.capacity_factor}")
         pattern = self.pattern or ("center" if self.spp == 1 else
@@ -168,6 +172,9 @@ class Renderer:
         self.block_sums = rt.buffer(4 * -(-cap // SCAN_BLOCK))
         self.counts = rt.buffer(4 * (MAX_DEPTH + 2))
         self.stats = rt.buffer(4 * STATS_LEN)
+        self._stats_host = np.zeros(STATS_LEN, np.uint32)  # last frame's, copied without a wait
+        self._stats_evt: cl.Event | None = None
+        self._levels = self._deepest = s.bounces
         self.framebuffer = rt.buffer(16 * self.n_pixels)
         self.rgba = rt.buffer(4 * self.n_pixels)
         self.aov = rt.buffer(AOV.itemsize * (self.n_pixels if s.aov else 1))
@@ -203,6 +210,14 @@ class Renderer:
     def set_camera(self, eye, target, up=(0.0, 1.0, 0.0), fov: float = 60.0) -> None:
         """Camera for the next frames (uploaded with the frame, 96 bytes)."""
         self._camera = make_camera(eye, target, up, fov, self.settings)
+
+    def set_camera_record(self, camera: np.ndarray) -> None:
+        """Use a Camera record made by :func:`make_camera` (same image size and samples)."""
+        c = np.asarray(camera, CAMERA).reshape(())
+        s = self.settings
+        if (int(c["width"]), int(c["height"]), int(c["spp"])) != (s.width, s.height, s.spp):
+            raise ValueError("camera record was made for another image size or spp")
+        self._camera = c.copy()
 
     @property
     def camera(self) -> np.ndarray:
@@ -252,12 +267,15 @@ class Renderer:
         lights = self.scene.light_buf
         has_lights = len(self.scene.lights) > 0
         # no material reflects or refracts: no secondary wavefront can exist, launch none
-        bounces = s.bounces if self.scene.has_secondary else 0
+        deepest = s.bounces if self.scene.has_secondary else 0
+        bounces = min(deepest, self._level_hint()) if s.adaptive_depth else deepest
+        self._levels, self._deepest = bounces, deepest
         u32 = np.uint32
+        ls = s.local_size
         for q0, nq in self.chunks:
             n_rays = nq * s.spp
             self._bind(self.k_raygen, self.camera_buf, u32(q0), u32(n_rays), self.rays[0],
-                                   self.counts)
+                       self.counts)
             rt.launch("render.raygen", self.k_raygen, n_rays)
             cur, nxt = 0, 1
             launch_n = n_rays
@@ -266,32 +284,44 @@ class Renderer:
                 rays, hits = self.rays[cur], self.hits
                 self._bind(self.k_trace, *scene_args, rays, self.counts, d, hits)
                 rt.launch("render.trace" if depth == 0 else "render.trace_secondary",
-                          self.k_trace, launch_n, 64)
+                          self.k_trace, launch_n, ls)
                 self._bind(self.k_shade, *geom, self.params_buf, self.camera_buf, rays, hits,
-                                      self.counts, d, self.radiance, self.child, self.aov,
-                                      u32(s.aov))
-                rt.launch("render.shade", self.k_shade, launch_n, 64)
+                           self.counts, d, self.radiance, self.child, self.aov, u32(s.aov))
+                rt.launch("render.shade", self.k_shade, launch_n, ls)
                 if has_lights:
                     self._bind(self.k_shadow, *scene_args, *geom, self.params_buf, lights, rays,
-                                           hits, self.counts, d, self.radiance)
-                    rt.launch("render.shadow", self.k_shadow, launch_n, 64)
-                if depth < bounces:
+                               hits, self.counts, d, self.radiance)
+                    rt.launch("render.shadow", self.k_shadow, launch_n, ls)
+                if depth < deepest:  # the last launched level still counts its children
                     n_blocks = -(-launch_n // SCAN_BLOCK)
                     self._bind(self.k_scan_blocks, self.child, self.counts, d, self.block_sums)
                     rt.launch("render.secondary", self.k_scan_blocks, n_blocks * SCAN_WG, SCAN_WG)
                     self._bind(self.k_scan_sums, self.block_sums, u32(n_blocks), self.counts, d,
-                                              u32(self.capacity), self.stats)
+                               u32(self.capacity), self.stats)
                     rt.launch("render.secondary", self.k_scan_sums, SCAN_WG, SCAN_WG)
+                if depth < bounces:
                     self._bind(self.k_scatter, *geom, self.params_buf, rays, hits, self.counts, d,
-                                            self.child, self.block_sums, self.rays[nxt])
-                    rt.launch("render.secondary", self.k_scatter, launch_n, 64)
+                               self.child, self.block_sums, self.rays[nxt])
+                    rt.launch("render.secondary", self.k_scatter, launch_n, ls)
                 self._bind(self.k_accumulate, self.camera_buf, u32(q0), u32(nq), rays,
-                                           self.radiance, self.counts, d, self.framebuffer)
-                rt.launch("render.accumulate", self.k_accumulate, nq, 64)
+                           self.radiance, self.counts, d, self.framebuffer)
+                rt.launch("render.accumulate", self.k_accumulate, nq, ls)
                 cur, nxt = nxt, cur
                 launch_n = min(self.capacity, 2 * launch_n)
         self._bind(self.k_tonemap, self.framebuffer, u32(self.n_pixels), self.params_buf, self.rgba)
-        rt.launch("render.tonemap", self.k_tonemap, self.n_pixels, 64)
+        rt.launch("render.tonemap", self.k_tonemap, self.n_pixels, ls)
+        self._stats_evt = cl.enqueue_copy(q, self._stats_host, self.stats, is_blocking=False)
+
+    def _level_hint(self) -> int:
+        """Depth levels to launch: the deepest level with rays in the last frame whose counts
+        have arrived (never waits; all levels before any has). The last launched level records
+        the children it could not trace, so a scene that needs one level more gets it in the
+        next frame (for one frame those rays are missing: read_stats()['untraced'])."""
+        evt = self._stats_evt
+        if evt is None or evt.command_execution_status != cl.command_execution_status.COMPLETE:
+            return self.settings.bounces if evt is None else self._levels
+        deep = [d for d in range(1, self.settings.bounces + 1) if self._stats_host[d] > 0]
+        return max(deep, default=0)
 
     # -- outputs (each one synchronises) ------------------------------------------------------
     def read_rgba(self) -> np.ndarray:
@@ -323,11 +353,13 @@ class Renderer:
     def read_stats(self) -> dict:
         """Rays traced per depth over the last frame and children dropped (wavefront full)."""
         st = self.rt.to_host(self.stats, np.uint32, STATS_LEN)
-        per_depth = [int(x) for x in st[: self.settings.bounces + 1]]
-        if self.settings.bounces == 0 or not self.scene.has_secondary:  # no scan ran
+        L = self._levels
+        per_depth = [int(x) for x in st[: L + 1]]
+        if self._deepest == 0:  # no scan ran: the primary count is the chunks' sum
             per_depth = [sum(nq * self.settings.spp for _, nq in self.chunks)]
+        untraced = int(st[L + 1]) if L < self._deepest else 0
         return {"rays_per_depth": per_depth, "dropped": int(st[STAT_DROPPED]),
-                "secondary_rays": int(sum(per_depth[1:]))}
+                "secondary_rays": int(sum(per_depth[1:])), "levels": L, "untraced": untraced}
 
     def memory_report(self) -> dict:
         """Device bytes per ray slot and per primary ray, and per triangle of the scene."""

@@ -240,3 +240,24 @@ def test_shadow_rays_do_not_hit_their_own_surface(rt):
     hit = lit_ref.max(axis=2) > ambient_only * 1.5
     assert hit.mean() > 0.9
     np.testing.assert_allclose(fb[hit], lit_ref[hit], rtol=1e-4)
+
+
+def test_adaptive_depth_launches_only_needed_levels_and_matches(rt):
+    """After the first frame only the levels the scene needs run; the image is unchanged."""
+    sc = tiny_scene(rt)
+    full = Renderer(rt, sc, RenderSettings(width=24, height=16, bounces=12,
+                                           adaptive_depth=False))
+    adapt = Renderer(rt, sc, RenderSettings(width=24, height=16, bounces=12))
+    for r in (full, adapt):
+        r.set_camera((0.5, 1.5, 3.0), (0, 0.3, 0), (0, 1, 0), 50)
+    full.render()
+    ref_fb = full.read_framebuffer()
+    per_depth = full.read_stats()["rays_per_depth"]
+    needed = max(d for d, n in enumerate(per_depth) if n > 0)
+    assert needed < 12
+    for frame in range(2):
+        adapt.render()
+        st = adapt.read_stats()
+        assert st["levels"] == (12 if frame == 0 else needed)
+        assert st["untraced"] == 0
+        np.testing.assert_array_equal(adapt.read_framebuffer(), ref_fb)
