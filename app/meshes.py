@@ -143,3 +143,80 @@ def height_field_grid(n: int, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     a, b, c, d = i[:-1, :-1], i[:-1, 1:], i[1:, :-1], i[1:, 1:]
     tri = np.stack([np.stack([a, c, b], -1), np.stack([b, c, d], -1)], -2).reshape(-1, 3)
     return pts, tri.astype(np.uint32)
+
+
+# ---- shading attributes for the renderer: vertex normals, OBJ material groups, MTL colours ----
+
+
+def smooth_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (unit; zero where no triangle contributes)."""
+    V = V.astype(np.float64)
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    acc = np.zeros_like(V)
+    for k in range(3):
+        np.add.at(acc, F[:, k], n)
+    length = np.linalg.norm(acc, axis=1, keepdims=True)
+    return (acc / np.where(length > 0, length, 1.0)).astype(np.float32)
+
+
+def read_mtl(path: Path) -> dict:
+    """{material name: {'Kd': rgb, 'Ks': rgb, 'Ns': float}} from an MTL file (missing: {})."""
+    out: dict = {}
+    cur = None
+    if not path.is_file():
+        return out
+    for line in path.read_text(errors="replace").splitlines():
+        parts = line.split()
+        if not parts:
+            continue
+        if parts[0] == "newmtl" and len(parts) > 1:
+            cur = out.setdefault(" ".join(parts[1:]), {})
+        elif cur is not None and parts[0] in ("Kd", "Ks") and len(parts) >= 4:
+            cur[parts[0]] = tuple(float(x) for x in parts[1:4])
+        elif cur is not None and parts[0] == "Ns" and len(parts) >= 2:
+            cur["Ns"] = float(parts[1])
+    return out
+
+
+def load_mesh_groups(path: Path, n_tris: int):
+    """``(ids, names)``: per-triangle MTL material ids of an OBJ, aligned with
+    :func:`load_mesh`'s triangles, and the material names; None when the file has no groups.
+    Cached beside the file as ``cache/<name>.groups.npz`` (machines without pyvista read it)."""
+    from app.io import atomic_path
+
+    if path.suffix.lower() != ".obj":
+        return None
+    text = path.read_bytes()
+    if b"usemtl" not in text:
+        return None
+    digest = hashlib.sha1(text).hexdigest()
+    cache = path.parent / "cache" / f"{path.name}.groups.npz"
+    if cache.is_file():
+        with np.load(cache) as z:
+            if str(z["sha1"]) == digest and len(z["ids"]) == n_tris:
+                return z["ids"], [str(x) for x in z["names"]]
+    try:
+        import pyvista as pv
+    except ImportError:
+        raise InputError(f"{path}: material groups need pyvista or an up-to-date cache "
+                         f"{cache}") from None
+    mesh = pv.read(str(path)).triangulate().clean()
+    if "MaterialIds" not in mesh.cell_data or mesh.n_cells != n_tris:
+        return None
+    ids = np.asarray(mesh.cell_data["MaterialIds"], np.int32)
+    names = [str(x) for x in mesh.field_data["MaterialNames"]]
+    try:
+        with atomic_path(cache, suffix=".partial.npz") as tmp:
+            np.savez_compressed(tmp, ids=ids, names=np.array(names), sha1=np.array(digest))
+    except OSError:
+        pass
+    return ids, names
+
+
+def mtl_path(path: Path) -> Path:
+    for line in path.read_text(errors="replace").splitlines()[:50]:
+        if line.startswith("mtllib"):
+            cand = path.parent / line.split(maxsplit=1)[1].strip()
+            if cand.is_file():
+                return cand
+    return path.with_suffix(".mtl")

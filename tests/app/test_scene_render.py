@@ -89,3 +89,31 @@ rotation = [0, 90, 0]
     assert s.extra["materials"]["red"].diffuse == (1.0, 0.0, 0.0)
     assert s.extra["meshes"][0].file.name == "bunny_5k.obj"
     check_material_names(s)
+
+
+def test_mesh_shading_attributes():
+    from app.meshes import (
+        MODELS_DIR,
+        load_mesh,
+        load_mesh_groups,
+        mtl_path,
+        read_mtl,
+        smooth_normals,
+    )
+
+    path = MODELS_DIR / "sailboat_15k.obj"
+    V, F = load_mesh(path)
+    ids, names = load_mesh_groups(path, len(F))
+    assert len(ids) == len(F) and 0 <= ids.min() and ids.max() < len(names)
+    assert {"Shiny", "NOTShiny", "WorldGridMaterial"} <= set(names)
+    assert len(np.unique(ids)) >= 4
+    mtl = read_mtl(mtl_path(path))
+    assert mtl["WorldGridMaterial"]["Kd"] == (0.215861, 0.215861, 0.215861)
+    assert mtl["Shiny"]["Ns"] == 200.0
+    # a closed box: area-weighted vertex normals point away from its centre
+    Vb = np.array([[x, y, z] for x in (0, 1) for y in (0, 2) for z in (0, 3)], np.float32)
+    Fb = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    n = smooth_normals(Vb, Fb)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-6)
+    assert (np.sum(n * (Vb - Vb.mean(axis=0)), axis=1) > 0).all()
