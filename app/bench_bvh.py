@@ -350,7 +350,10 @@ def add_arguments(p) -> None:
     p.add_argument("--meshes", default=",".join(MESHES),
                    help="meshes in scenes/models to time builds of ('' for none)")
     p.add_argument("--reps", type=int, default=10, help="timed repetitions (median)")
-    p.add_argument("--leaf-size", type=int, default=4, help="most triangles per BVH leaf")
+    from raytrace.bvh import DEFAULT_LEAF_SIZE
+
+    p.add_argument("--leaf-size", type=int, default=DEFAULT_LEAF_SIZE,
+                   help="most triangles per BVH leaf (default: %(default)s)")
     p.add_argument("--local-size", type=int, default=64, help="work-group size of the trace kernel")
     p.add_argument("--check-rays", type=int, default=1000,
                    help="rays per set checked against the float64 reference")

@@ -6,6 +6,10 @@
 
 #include "bvh.h"
 
+#ifdef cl_khr_fp64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#endif
+
 /* Bits per axis are capped: float32 centroids carry 24 bits, and the cap keeps (c - lo) * scale
    exact enough that neighbouring cells are ordered correctly. */
 #define MORTON_MAX_AXIS_BITS 21
@@ -53,9 +57,17 @@ inline uint deposit_bits(uint q, uint mask) {
     return r;
 }
 
+/* Cell index along one axis: (c - lo) * (cells / ext), the scale correctly rounded (a double
+   division where the device has doubles: OpenCL's float division may be off by ulps, which at 21
+   bits per axis moves points across cell boundaries differently on different devices). */
 inline uint morton_quantize(float c, float lo, float ext, uint mask) {
     float cells = (float)(1u << popcount(mask));
-    float f = (c - lo) / ext * cells;
+#ifdef cl_khr_fp64
+    float scale = (float)((double)cells / (double)ext);
+#else
+    float scale = cells / ext;
+#endif
+    float f = (c - lo) * scale;
     f = isnan(f) ? 0.0f : clamp(f, 0.0f, cells - 1.0f);
     return (uint)f;
 }

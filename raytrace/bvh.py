@@ -33,7 +33,7 @@ HIT_DTYPE = np.dtype([("t", np.float32), ("u", np.float32), ("v", np.float32),
                       ("prim", np.int32), ("inst", np.int32)])
 
 BOUNDS_WG = 256
-DEFAULT_LEAF_SIZE = 2
+DEFAULT_LEAF_SIZE = 1
 DEFAULT_KEY_BITS = 32
 #: Leaf sizes are capped: a leaf is tested triangle by triangle, and 4 bits is plenty.
 MAX_LEAF_SIZE = 15

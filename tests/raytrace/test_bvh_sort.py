@@ -29,8 +29,8 @@ def test_radix_sort_is_a_stable_sort(rt, n):
 
 def morton_reference(c, key_bits=32, max_axis_bits=21):
     """NumPy restatement of kernels/bvh_hierarchy.h morton_masks/morton_isotropic. The bit
-    schedule is computed independently; the quantisation uses float32 steps like the device (at
-    21 bits per axis float64 would round the last bit differently on many points)."""
+    schedule is computed independently; the quantisation uses the device's float32 steps with a
+    correctly rounded scale (at 21 bits per axis float64 would round the last bit differently)."""
     c = c.astype(np.float32)
     lo, hi = c.min(0), c.max(0)
     ext = np.maximum(hi - lo, np.float32(0))
@@ -46,9 +46,9 @@ def morton_reference(c, key_bits=32, max_axis_bits=21):
         cell[a] *= 0.5
         nb[a] += 1
     with np.errstate(invalid="ignore", divide="ignore"):
-        q = [np.clip(np.floor((c[:, a] - lo[a]) / ext[a] * np.float32(2.0 ** nb[a])), 0,
-                     2 ** nb[a] - 1).astype(np.uint64) if nb[a] else np.zeros(len(c), np.uint64)
-             for a in range(3)]
+        scale = [np.float32(2.0 ** nb[a] / np.float64(ext[a])) for a in range(3)]
+        q = [np.clip(np.floor((c[:, a] - lo[a]) * scale[a]), 0, 2 ** nb[a] - 1).astype(np.uint64)
+             if nb[a] else np.zeros(len(c), np.uint64) for a in range(3)]
     key = np.zeros(len(c), np.uint64)
     taken = [0, 0, 0]
     for a in order:
