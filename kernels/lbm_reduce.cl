@@ -5,12 +5,10 @@
  */
 #include "lbm.h"
 
-typedef struct {
-    float mass, max_u2, max_fr2, min_h;
-    uint nan_cells;
-} LbmAcc;
+/* Accumulators are LbmPartial values (lbm.h), the layout the partials are stored in. */
+#define LBM_ACC_ZERO {0.0f, 0.0f, 0.0f, INFINITY, 0u, 0u, 0u, 0u}
 
-void lbm_acc_merge(LbmAcc* a, const LbmAcc b)
+void lbm_acc_merge(LbmPartial* a, const LbmPartial b)
 {
     a->mass += b.mass;
     a->max_u2 = fmax(a->max_u2, b.max_u2);
@@ -20,7 +18,7 @@ void lbm_acc_merge(LbmAcc* a, const LbmAcc b)
 }
 
 /* Tree reduction of one work-group's accumulators; the result is valid in work-item 0. */
-LbmAcc lbm_acc_reduce_local(LbmAcc acc, __local float* l_mass, __local float* l_u2,
+LbmPartial lbm_acc_reduce_local(LbmPartial acc, __local float* l_mass, __local float* l_u2,
                             __local float* l_fr2, __local float* l_h, __local uint* l_nan)
 {
     const int lid = get_local_id(0);
@@ -40,7 +38,7 @@ LbmAcc lbm_acc_reduce_local(LbmAcc acc, __local float* l_mass, __local float* l_
         }
         barrier(CLK_LOCAL_MEM_FENCE);
     }
-    LbmAcc out = {l_mass[0], l_u2[0], l_fr2[0], l_h[0], l_nan[0]};
+    LbmPartial out = {l_mass[0], l_u2[0], l_fr2[0], l_h[0], l_nan[0], 0u, 0u, 0u};
     return out;
 }
 
@@ -51,7 +49,7 @@ void lbm_reduce_partial(__global const float* restrict f, const LbmParams p,
     __local float l_mass[LBM_REDUCE_WG], l_u2[LBM_REDUCE_WG], l_fr2[LBM_REDUCE_WG],
         l_h[LBM_REDUCE_WG];
     __local uint l_nan[LBM_REDUCE_WG];
-    LbmAcc acc = {0.0f, 0.0f, 0.0f, INFINITY, 0u};
+    LbmPartial acc = LBM_ACC_ZERO;
     for (int n = get_global_id(0); n < p.n_cells; n += get_global_size(0)) {
         float fl[9], h, mx, my;
         for (int a = 0; a < 9; ++a) fl[a] = f[a * p.n_cells + n];
@@ -70,12 +68,7 @@ void lbm_reduce_partial(__global const float* restrict f, const LbmParams p,
     }
     acc = lbm_acc_reduce_local(acc, l_mass, l_u2, l_fr2, l_h, l_nan);
     if (get_local_id(0) == 0) {
-        __global LbmPartial* out = partials + get_group_id(0);
-        out->mass = acc.mass;
-        out->max_u2 = acc.max_u2;
-        out->max_fr2 = acc.max_fr2;
-        out->min_h = acc.min_h;
-        out->nan_cells = acc.nan_cells;
+        partials[get_group_id(0)] = acc;
     }
 }
 
@@ -100,11 +93,9 @@ void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
     __local float l_mass[LBM_REDUCE_WG], l_u2[LBM_REDUCE_WG], l_fr2[LBM_REDUCE_WG],
         l_h[LBM_REDUCE_WG];
     __local uint l_nan[LBM_REDUCE_WG];
-    LbmAcc acc = {0.0f, 0.0f, 0.0f, INFINITY, 0u};
+    LbmPartial acc = LBM_ACC_ZERO;
     for (int k = get_local_id(0); k < n_partials; k += LBM_REDUCE_WG) {
-        const LbmAcc b = {partials[k].mass, partials[k].max_u2, partials[k].max_fr2,
-                          partials[k].min_h, partials[k].nan_cells};
-        lbm_acc_merge(&acc, b);
+        lbm_acc_merge(&acc, partials[k]);
     }
     acc = lbm_acc_reduce_local(acc, l_mass, l_u2, l_fr2, l_h, l_nan);
     if (get_local_id(0) != 0) return;
