@@ -82,11 +82,13 @@ def _with_local_size(rt, rs, renderer, ls: int):
 
 
 def _build(scene_name: str, rt, size, **kw):
-    from app.cmd_render import build_world
+    """(render scene, renderer, solver) of a shipped scene through the app's World."""
     from app.scene import load_scene
+    from app.world import World
 
-    scene = load_scene(SCENES_DIR / f"{scene_name}.toml")
-    return build_world(scene, rt, width=size[0], height=size[1], **kw)
+    w = World(load_scene(SCENES_DIR / f"{scene_name}.toml"), rt, width=size[0], height=size[1],
+              **kw)
+    return w.render_scene, w.renderer, w.sim
 
 
 def _check_against(rt, check_rt, name: str, size: int) -> dict:

@@ -61,7 +61,7 @@ WATER_SCHEMA = {
     "depth": Field("float", 0.3, lo=0.0, lo_open=True, hi=1e4, unit="m", doc="still depth"),
     "boundary": Field("str", "slip", choices=("slip", "noslip"),
                       doc="walls: slip (specular) or noslip (bounce-back)"),
-    "viscosity": Field("float", 1e-4, lo=0.0, hi=1e3, unit="m^2/s",
+    "viscosity": Field("float", 1e-4, lo=0.0, lo_open=True, hi=1e3, unit="m^2/s",
                        doc="kinematic (eddy) viscosity: larger makes waves fade faster"),
     "expected_speed": Field("float", 0.5, lo=0.0, lo_open=True, hi=1e3, unit="m/s",
                             doc="largest flow speed expected, used to choose the time step"),

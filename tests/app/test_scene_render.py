@@ -19,11 +19,11 @@ def test_the_pool_and_the_seed_scenes_ship():
 
 @pytest.mark.parametrize("path", SCENES, ids=[p.stem for p in SCENES])
 def test_shipped_scene_renders_finite(rt, path):
-    from app.cmd_render import build_world
+    from app.world import World
 
-    scene = load_scene(path)
-    rs, renderer, _ = build_world(scene, rt, width=24, height=16, water_steps=2)
-    img = renderer.render()
+    world = World(load_scene(path), rt, width=24, height=16, water_steps=2)
+    renderer = world.renderer
+    img = world.frame()
     fb = renderer.read_framebuffer()
     assert np.isfinite(fb).all()
     assert fb.min() >= 0
