@@ -7,6 +7,7 @@ cache key); a hash of every header is added too, so no driver cache survives a h
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import warnings
@@ -82,7 +83,9 @@ class Runtime:
         options += [_format_define(k, v) for k, v in key[1]]
         text = f'#line 1 "{path.name}"\n' + path.read_text()
         try:
-            with warnings.catch_warnings():
+            # The source is handed over as a string, so a compiler resolves `#include "x.h"`
+            # against the working directory before -I: build from the kernel folder itself.
+            with warnings.catch_warnings(), contextlib.chdir(KERNEL_DIR):
                 warnings.simplefilter("ignore", cl.CompilerWarning)
                 prg = cl.Program(self.context, text).build(options=options)
         except cl.RuntimeError as exc:

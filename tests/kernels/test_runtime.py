@@ -72,3 +72,10 @@ def test_build_error_names_file_and_carries_log(tmp_path, monkeypatch, rt):
 def test_copy_bandwidth_is_positive(rt):
     bw = measure_copy_bandwidth(rt, nbytes=1 << 20, reps=2)
     assert bw["GBps"] > 0 and bw["bytes"] == 1 << 20
+
+
+def test_includes_resolve_to_the_kernel_folder_not_the_cwd(tmp_path, monkeypatch, rt):
+    (tmp_path / "common.h").write_text('#error "a stray common.h in the cwd was included"\n')
+    monkeypatch.chdir(tmp_path)
+    nonce = int.from_bytes(tmp_path.name.encode()[-4:], "little")
+    Runtime(rt.device).program("bandwidth.cl", {"LBWATER_TEST_NONCE": nonce})
