@@ -73,7 +73,7 @@ def test_simulate_reports_progress(scene, tmp_path, capsys):
     (None, r"does-not-exist.toml: scene file does not exist"),
     ("[scene]\nname = 'dry'\n", r"the scene has no \[water\] section"),
     (SCENE.replace("viscosity = 1e-4", "viscosity = 0.0"),
-     r"\[water\] viscosity: viscosity = 0 is out of range; allowed \(0, 1000\]"),
+     r"\[water\] viscosity: viscosity = 0 is out of range; allowed in \(0, 1000\]"),
     (SCENE.replace("radius = 0.1\n", "radius = 0.001\n"), r"add_drop: radius=0.001 m"),
     (SCENE.replace("depth = 0.2", "depth = -1"), r"depth = -1 is out of range"),
 ])
