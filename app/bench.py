@@ -10,6 +10,7 @@ BENCHES = [
     ("render", "app.bench_render", "renderer: the seed's scenes per stage, FPS, error vs spp"),
     ("bvh", "app.bench_bvh", "GPU BVH build/refit/TLAS ms and ray rates vs NVIDIA Warp"),
     ("lbm", "app.bench_lbm", "LBM step: MLUPs/s and share of the measured copy bandwidth"),
+    ("frame", "app.bench_frame", "the whole frame loop: LBM, surface, BVH, render"),
 ]
 
 

@@ -1,0 +1,25 @@
+"""`lbwater bench frame` runs the World's frame loop and writes per-stage times and FPS."""
+
+import json
+
+from app.cli import main
+
+
+def test_bench_frame_writes_stages_and_fps(tmp_path, capsys):
+    out = tmp_path / "res"
+    assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "3",
+                 "--warmup", "1", "--out", str(out)]) == 0
+    rows = json.loads((out / "bench_frame.json").read_text())
+    assert len(rows) == 1 and rows[0]["cells"] == "32x24"
+    r = rows[0]
+    assert r["fps"] > 0 and r["lbm_steps_per_frame"] >= 1
+    assert r["lbm.step_ms"] > 0 and r["render.trace_ms"] > 0 and r["kernels_ms"] > 0
+    assert (out / "bench_frame.csv").read_text().startswith("device,")
+    assert "32x24 cells" in capsys.readouterr().out
+
+
+def test_bench_frame_needs_water(tmp_path, capsys):
+    scene = tmp_path / "dry.toml"
+    scene.write_text('[[meshes]]\nfile = "bunny_5k.obj"\n')
+    assert main(["bench", "frame", "--scene", str(scene), "--out", str(tmp_path)]) == 2
+    assert "needs a scene with [water]" in capsys.readouterr().err
