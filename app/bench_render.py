@@ -28,13 +28,14 @@ SEED_MS = {
 }
 SEED_BYTES_PER_RAY = 144
 
-#: Our stage names -> the seed's table columns.
+#: Our stage names -> the seed's table columns. Shadow rays are traced inside render.shade (one
+#: launch per depth level), so the seed's "shadows" and "shading" share one column.
 COLUMNS = {
     "ray_creation": ("render.raygen",),
     "primary_trace": ("render.trace",),
-    "shadows": ("render.shadow",),
     "secondary_trace": ("render.trace_secondary",),
-    "shading": ("render.shade", "render.secondary", "render.accumulate", "render.tonemap"),
+    "shading_shadows": ("render.shade",),
+    "compaction_gather": ("render.secondary", "render.gather"),
 }
 
 
@@ -54,7 +55,10 @@ def add_arguments(p) -> None:
                    help="work-group sizes tried; the table reports the fastest")
 
 
-def _frame_times(rt, renderer, repeats: int, warmup: int) -> tuple[dict, float]:
+def _frame_times(rt, renderer, repeats: int, warmup: int, enqueue_ms: list | None = None
+                 ) -> tuple[dict, float]:
+    """Median per-stage ms and median wall ms per frame; ``enqueue_ms`` (if given) receives
+    the host time spent inside enqueue_frame of each timed frame."""
     for _ in range(warmup):
         renderer.enqueue_frame(update_scene=False)
     rt.finish()
@@ -64,8 +68,11 @@ def _frame_times(rt, renderer, repeats: int, warmup: int) -> tuple[dict, float]:
     for _ in range(repeats):
         t0 = time.perf_counter()
         renderer.enqueue_frame(update_scene=False)
+        t1 = time.perf_counter()
         rt.finish()
         walls.append((time.perf_counter() - t0) * 1e3)
+        if enqueue_ms is not None:
+            enqueue_ms.append((t1 - t0) * 1e3)
         for k, v in rt.timer.collect().items():
             stages.setdefault(k, []).append(v)
     return {k: statistics.median(v) for k, v in stages.items()}, statistics.median(walls)
@@ -109,7 +116,7 @@ def _check_against(rt, check_rt, name: str, size: int) -> dict:
 
 
 def run(args) -> int:
-    from app.io import write_csv, write_json
+    from app.io import write_csv
     from kernels import get_runtime
 
     rt = get_runtime(args.device)
@@ -134,9 +141,11 @@ def run(args) -> int:
                     rt, rs, renderer, ls)
                 r_ls.enqueue_frame(update_scene=False)
                 rt.finish()
-                by_ls[ls] = (*_frame_times(rt, r_ls, args.repeats, args.warmup), r_ls)
+                enq: list[float] = []
+                by_ls[ls] = (*_frame_times(rt, r_ls, args.repeats, args.warmup, enq), r_ls,
+                             statistics.median(enq))
             best = min(by_ls, key=lambda k: by_ls[k][1])
-            stages, wall, renderer = by_ls[best]
+            stages, wall, renderer, enqueue = by_ls[best]
             stats = renderer.read_stats()
             fb = renderer.read_framebuffer()
             if not np.isfinite(fb).all():
@@ -153,7 +162,7 @@ def run(args) -> int:
             for col, names in COLUMNS.items():
                 row[f"{col}_ms"] = round(sum(stages.get(n, 0.0) for n in names), 4)
             row |= {"kernel_total_ms": round(gpu_total, 4), "wall_ms": round(wall, 4),
-                    "fps": round(1000 / wall, 1),
+                    "enqueue_ms": round(enqueue, 4), "fps": round(1000 / wall, 1),
                     "primary_rays": size * size,
                     "secondary_rays": stats["secondary_rays"],
                     "rays_per_depth": " ".join(map(str, stats["rays_per_depth"])),
@@ -165,9 +174,24 @@ def run(args) -> int:
             row["stages_ms"] = {k: round(v, 4) for k, v in sorted(stages.items())}
             rows.append(row)
             print(f"{name:7s} {size:5d}^2 wall {wall:8.3f} ms  ({1000 / wall:8.1f} FPS)  "
-                  f"kernels {gpu_total:8.3f} ms  secondary {stats['secondary_rays']:9d}  "
-                  f"seed {seed} ms  x{row['speedup_fps']}", flush=True)
+                  f"kernels {gpu_total:8.3f} ms  enqueue {enqueue:6.3f} ms  "
+                  f"secondary {stats['secondary_rays']:9d}  seed {seed} ms  "
+                  f"x{row['speedup_fps']}  ls {best}  {row['stages_ms']}", flush=True)
+            _write(out, rt, check_rt, date, args, rows, [])
     conv = _convergence(rt, args) if args.convergence_scene else []
+    _write(out, rt, check_rt, date, args, rows, conv)
+    if conv:
+        write_csv(out / "render_convergence.csv", conv)
+        _chart(conv, out / "render_convergence.png", rt.name, args.convergence_scene)
+    print(f"wrote {out / 'render.json'}, render.csv"
+          + (", render_convergence.csv/.png" if conv else ""))
+    return 0
+
+
+def _write(out: Path, rt, check_rt, date: str, args, rows: list, conv: list) -> None:
+    """render.json and render.csv (rewritten after every row, so a cut-off run keeps its rows)."""
+    from app.io import write_csv, write_json
+
     meta = {"device": rt.name, "date": date, "check_device": check_rt.name if check_rt else None,
             "repeats": args.repeats, "warmup": args.warmup,
             "seed_bytes_per_ray": SEED_BYTES_PER_RAY}
@@ -175,12 +199,6 @@ def run(args) -> int:
     write_csv(out / "render.csv", [{k: v for k, v in r.items()
                                     if k not in ("stages_ms", "wall_ms_by_local_size")}
                                    for r in rows])
-    if conv:
-        write_csv(out / "render_convergence.csv", conv)
-        _chart(conv, out / "render_convergence.png", rt.name, args.convergence_scene)
-    print(f"wrote {out / 'render.json'}, render.csv"
-          + (", render_convergence.csv/.png" if conv else ""))
-    return 0
 
 
 def _convergence(rt, args) -> list[dict]:

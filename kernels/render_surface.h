@@ -152,4 +152,23 @@ inline int spawn_children(const Ray* r, const Surface* s, float3 w, uint depth,
     return n;
 }
 
+/* Writes ray i's children into the next wavefront at its compacted offset: the exclusive offset
+ * within its scan block (child_offsets[i]) plus the block's offset (block_sums, render_scan). */
+inline void scatter_children(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                             __global const Ray* rays, __global const Hit* hits, uint i,
+                             uint depth, __global const uint* child_offsets,
+                             __global const uint* block_sums, __global Ray* out)
+{
+    const Hit h = hits[i];
+    if (h.prim < 0) return;
+    const Ray r = rays[i];
+    const Surface s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
+    const float3 w = attenuated_weight(&r, h.t, g_mat);
+    Ray kids[2];
+    const int n = spawn_children(&r, &s, w, depth, prm, g_mat, kids);
+    const uint dst = child_offsets[i] + block_sums[i / RENDER_SCAN_BLOCK];
+    for (int k = 0; k < n; k++)
+        if (dst + (uint)k < prm->capacity) out[dst + (uint)k] = kids[k];
+}
+
 #endif

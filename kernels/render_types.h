@@ -46,8 +46,9 @@
 #define RENDER_STAT_DROPPED (RENDER_MAX_DEPTH + 1)
 #define RENDER_STATS_LEN (RENDER_MAX_DEPTH + 2)
 
-/* 48 bytes: three float4 rows. One wavefront entry. */
-typedef struct {
+/* 48 bytes: three float4 rows, 16-byte aligned so a ray moves as three vector loads/stores.
+ * One wavefront entry. */
+typedef struct __attribute__((aligned(16))) {
     float ox, oy, oz;   /* origin (m), already offset off the surface it left */
     uint pixel;         /* tile-order pixel id q; rays stay sorted by it */
     float dx, dy, dz;   /* unit direction; all zero for a dead (padding) ray */

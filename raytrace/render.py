@@ -7,11 +7,16 @@ the ray buffers would not fit in device memory):
     render.raygen      primary rays, 8x8 tiles in Morton order, spp per pixel, weight 1/spp
     per depth 0..levels (levels: bounces, or as many as the last frame needed):
       render.trace     closest hit (render.trace_secondary for depth >= 1)
-      render.shade     ambient, sky on a miss, Beer-Lambert, child counts, primary AOVs
-      render.shadow    shadow rays and Phong direct light per light
-      render.secondary prefix-sum compaction of reflection/refraction children (3 launches)
-      render.accumulate  each pixel gathers its rays' radiance (rays stay sorted by pixel)
-    render.tonemap     exposure, tonemap, sRGB -> RGBA8
+      render.shade     ambient, sky on a miss, Beer-Lambert, shadow rays and Phong direct light,
+                       child counts, primary AOVs
+      render.secondary prefix-sum compaction offsets of the reflection/refraction children (one
+                       launch: block scans, the last block scans the block totals)
+      render.gather    children scattered into the next wavefront; each pixel gathers its rays'
+                       radiance (rays stay sorted by pixel); after the last level, tonemap + sRGB
+
+Four launches per depth level. Every kernel object belongs to this renderer (one per depth
+level) and its arguments are bound when the scene's buffers change, so a frame is mostly bare
+enqueues from Python.
 
 Only the RGBA8 image is read back (:meth:`Renderer.read_rgba`); ray counts stay on the device
 and are read on request (:meth:`Renderer.read_stats`, used by the benchmark).
@@ -20,7 +25,6 @@ and are read on request (:meth:`Renderer.read_stats`, used by the benchmark).
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 
 import numpy as np
@@ -46,10 +50,6 @@ from raytrace.render_types import (
     SkyKind,
     Tonemap,
 )
-
-#: kernel id -> (id of the renderer that last bound it, its arguments); see Renderer._bind
-_BOUND: dict[int, tuple[int, list]] = {}
-_TOKENS = itertools.count()
 
 #: Device bytes per ray slot: input and output ray, hit record, radiance, child count/offset.
 BYTES_PER_RAY_SLOT = 2 * RAY.itemsize + HIT_DTYPE.itemsize + 16 + 4
@@ -143,7 +143,6 @@ class Renderer:
 
     def __init__(self, rt: Runtime, scene: RenderScene, settings: RenderSettings):
         self.rt, self.scene = rt, scene
-        self._token = next(_TOKENS)  # never reused, unlike id(self)
         self.settings = s = settings.resolved()
         order = PixelOrder.from_str(s.order)
         self.n_pixels = s.width * s.height
@@ -181,30 +180,86 @@ class Renderer:
         self.camera_buf = rt.buffer(CAMERA.itemsize)
         self.params_buf = rt.buffer(RENDERPARAMS.itemsize)
         self._camera = None
-        k = rt.kernel
-        self.k_raygen = k("render_raygen.cl", "render_raygen")
-        self.k_trace = k("render_trace.cl", "render_trace")
-        self.k_shade = k("render_shade.cl", "render_shade")
-        self.k_shadow = k("render_shade.cl", "render_shadow")
-        self.k_scan_blocks = k("render_secondary.cl", "render_scan_blocks")
-        self.k_scan_sums = k("render_secondary.cl", "render_scan_sums")
-        self.k_scatter = k("render_secondary.cl", "render_scatter")
-        self.k_accumulate = k("render_frame.cl", "render_accumulate")
-        self.k_tonemap = k("render_frame.cl", "render_tonemap")
+        self.ticket = rt.to_device(np.zeros(1, np.uint32))  # render_scan's last-block ticket
+        # this renderer's own kernel objects: raygen, and per depth level trace/shade/scan/gather
+        self._programs = {src: rt.program(src) for src in (
+            "render_raygen.cl", "render_trace.cl", "render_shade.cl", "render_secondary.cl",
+            "render_frame.cl")}
+        self.k_raygen = cl.Kernel(self._programs["render_raygen.cl"], "render_raygen")
+        self._k: list[dict[str, cl.Kernel]] = []
+        self._bound_sig: tuple | None = None  # the buffers the kernels were bound to
+        self._vals: dict[tuple, int] = {}     # (kernel id, arg index) -> scalar it holds
+        self._uploaded: tuple = (None, None)  # camera and params bytes on the device
+        self._params_key = self._params_rec = None
+        ls = s.local_size
 
-    def _bind(self, kernel, *args) -> None:
-        """Set only the arguments that changed since ``kernel`` was last bound, by this renderer
-        (kernel objects are shared per device; arguments are captured at enqueue time)."""
-        owner, prev = _BOUND.get(id(kernel), (None, None))
-        if owner != self._token:  # another renderer bound it since: set everything
-            prev = None
-        for i, a in enumerate(args):
-            if prev is not None and (prev[i] is a or (isinstance(a, np.generic)
-                                                      and type(prev[i]) is type(a)
-                                                      and prev[i] == a)):
-                continue
-            kernel.set_arg(i, a)
-        _BOUND[id(kernel)] = (self._token, list(args))
+        # per-ray and per-pixel kernels loop with a grid stride, so they are launched with at
+        # most about one wave of work-items (2048 per compute unit) whatever the slot count
+        cap_items = -(-rt.device.max_compute_units * 2048 // ls) * ls
+
+        def rnd(n: int) -> tuple:
+            return (min(-(-int(n) // ls) * ls, cap_items),)
+
+        # per chunk: q0, n_q, primary rays, raygen size, and per depth level the sizes of
+        # trace/shade (ray slots), scan (work-groups x SCAN_WG), gather (scattering: ray slots;
+        # the last level: pixels)
+        self._plan = []
+        for q0, nq in self.chunks:
+            n_rays = nq * s.spp
+            depths, launch_n = [], n_rays
+            for _ in range(s.bounces + 1):
+                blocks = max(1, -(-launch_n // SCAN_BLOCK))
+                depths.append((rnd(launch_n), (blocks * SCAN_WG,), rnd(max(launch_n, nq)),
+                               rnd(nq)))
+                launch_n = min(self.capacity, 2 * launch_n)
+            self._plan.append((q0, nq, n_rays, (max(n_rays, STATS_LEN),), depths))
+
+    def _depth_kernels(self, depth: int) -> dict:
+        while len(self._k) <= depth:
+            p = self._programs
+            self._k.append({"trace": cl.Kernel(p["render_trace.cl"], "render_trace"),
+                            "shade": cl.Kernel(p["render_shade.cl"], "render_shade"),
+                            "scan": cl.Kernel(p["render_secondary.cl"], "render_scan"),
+                            "gather": cl.Kernel(p["render_frame.cl"], "render_gather")})
+            self._bound_sig = None
+        return self._k[depth]
+
+    def _bind(self, levels: int) -> None:
+        """Bind every kernel's arguments when the scene's buffers changed (a rebuild, new
+        tables) or a deeper level is needed; per-frame scalars go through :meth:`_set`."""
+        scene_args = tuple(self.scene.scene.trace_args())
+        geom = tuple(self.scene.shade_args())
+        bufs = scene_args + geom + (self.scene.light_buf,)
+        self._depth_kernels(levels)
+        old = self._bound_sig
+        if old is not None and len(old) == len(bufs) and all(
+                a is b for a, b in zip(old, bufs, strict=True)):
+            return
+        u32 = np.uint32
+        s = self.settings
+        self._vals.clear()
+        self.k_raygen.set_args(self.camera_buf, u32(0), u32(0), self.rays[0], self.counts,
+                               self.stats, u32(0))
+        for d, k in enumerate(self._k):
+            rays, out, dd = self.rays[d % 2], self.rays[(d + 1) % 2], u32(d)
+            k["trace"].set_args(*scene_args, rays, self.counts, dd, self.hits)
+            k["shade"].set_args(*scene_args, *geom, self.params_buf, self.camera_buf,
+                                self.scene.light_buf, rays, self.hits, self.counts, dd,
+                                self.radiance, self.child, self.aov, u32(s.aov))
+            k["scan"].set_args(self.child, self.counts, dd, u32(self.capacity), self.block_sums,
+                               self.ticket, self.stats)
+            k["gather"].set_args(*geom, self.params_buf, self.camera_buf, rays, self.hits,
+                                 self.counts, dd, self.child, self.block_sums, out, u32(0),
+                                 u32(0), u32(0), self.radiance, self.framebuffer, u32(0),
+                                 self.rgba)
+        self._bound_sig = bufs
+
+    def _set(self, kernel: cl.Kernel, index: int, value: int) -> None:
+        """Set a uint argument only when it differs from the value the kernel holds."""
+        key = (id(kernel), index)
+        if self._vals.get(key, 0) != value:
+            kernel.set_arg(index, np.uint32(value))
+            self._vals[key] = value
 
     # -- inputs -----------------------------------------------------------------------------
     def set_camera(self, eye, target, up=(0.0, 1.0, 0.0), fov: float = 60.0) -> None:
@@ -258,59 +313,55 @@ class Renderer:
         rt, s, q = self.rt, self.settings, self.rt.queue
         if update_scene:
             self.scene.update()
-        cl.enqueue_copy(q, self.camera_buf, self.camera.copy(), is_blocking=False)
-        cl.enqueue_copy(q, self.params_buf, np.array([self.params()]), is_blocking=False)
-        rt.record("render.raygen", cl.enqueue_fill_buffer(q, self.stats, np.uint32(0), 0,
-                                                          4 * STATS_LEN))
-        scene_args = self.scene.scene.trace_args()
-        geom = self.scene.shade_args()
-        lights = self.scene.light_buf
-        has_lights = len(self.scene.lights) > 0
+        self._upload_inputs()
         # no material reflects or refracts: no secondary wavefront can exist, launch none
         deepest = s.bounces if self.scene.has_secondary else 0
         bounces = min(deepest, self._level_hint()) if s.adaptive_depth else deepest
         self._levels, self._deepest = bounces, deepest
-        u32 = np.uint32
-        ls = s.local_size
-        for q0, nq in self.chunks:
-            n_rays = nq * s.spp
-            self._bind(self.k_raygen, self.camera_buf, u32(q0), u32(n_rays), self.rays[0],
-                       self.counts)
-            rt.launch("render.raygen", self.k_raygen, n_rays)
-            cur, nxt = 0, 1
-            launch_n = n_rays
+        self._bind(bounces)
+        ks, setv, record, enqueue = self._k, self._set, rt.timer.record, cl.enqueue_nd_range_kernel
+        ls = (s.local_size,)
+        scan_ls = (SCAN_WG,)
+        for q0, nq, n_rays, raygen_size, depths in self._plan:
+            setv(self.k_raygen, 1, q0)
+            setv(self.k_raygen, 2, n_rays)
+            setv(self.k_raygen, 6, int(q0 == 0))
+            record("render.raygen", enqueue(q, self.k_raygen, raygen_size, None))
             for depth in range(bounces + 1):
-                d = u32(depth)
-                rays, hits = self.rays[cur], self.hits
-                self._bind(self.k_trace, *scene_args, rays, self.counts, d, hits)
-                rt.launch("render.trace" if depth == 0 else "render.trace_secondary",
-                          self.k_trace, launch_n, ls)
-                self._bind(self.k_shade, *geom, self.params_buf, self.camera_buf, rays, hits,
-                           self.counts, d, self.radiance, self.child, self.aov, u32(s.aov))
-                rt.launch("render.shade", self.k_shade, launch_n, ls)
-                if has_lights:
-                    self._bind(self.k_shadow, *scene_args, *geom, self.params_buf, lights, rays,
-                               hits, self.counts, d, self.radiance)
-                    rt.launch("render.shadow", self.k_shadow, launch_n, ls)
+                k = ks[depth]
+                ray_size, scan_size, scatter_size, pixel_size = depths[depth]
+                record("render.trace_secondary" if depth else "render.trace",
+                       enqueue(q, k["trace"], ray_size, ls))
+                if depth == 0 and q0 == 0:
+                    q.flush()  # the device starts while the rest is enqueued
+                record("render.shade", enqueue(q, k["shade"], ray_size, ls))
                 if depth < deepest:  # the last launched level still counts its children
-                    n_blocks = -(-launch_n // SCAN_BLOCK)
-                    self._bind(self.k_scan_blocks, self.child, self.counts, d, self.block_sums)
-                    rt.launch("render.secondary", self.k_scan_blocks, n_blocks * SCAN_WG, SCAN_WG)
-                    self._bind(self.k_scan_sums, self.block_sums, u32(n_blocks), self.counts, d,
-                               u32(self.capacity), self.stats)
-                    rt.launch("render.secondary", self.k_scan_sums, SCAN_WG, SCAN_WG)
-                if depth < bounces:
-                    self._bind(self.k_scatter, *geom, self.params_buf, rays, hits, self.counts, d,
-                               self.child, self.block_sums, self.rays[nxt])
-                    rt.launch("render.secondary", self.k_scatter, launch_n, ls)
-                self._bind(self.k_accumulate, self.camera_buf, u32(q0), u32(nq), rays,
-                           self.radiance, self.counts, d, self.framebuffer)
-                rt.launch("render.accumulate", self.k_accumulate, nq, ls)
-                cur, nxt = nxt, cur
-                launch_n = min(self.capacity, 2 * launch_n)
-        self._bind(self.k_tonemap, self.framebuffer, u32(self.n_pixels), self.params_buf, self.rgba)
-        rt.launch("render.tonemap", self.k_tonemap, self.n_pixels, ls)
+                    record("render.secondary", enqueue(q, k["scan"], scan_size, scan_ls))
+                g = k["gather"]
+                scatter = depth < bounces
+                setv(g, 19, int(scatter))
+                setv(g, 24, int(not scatter))
+                setv(g, 20, q0)
+                setv(g, 21, nq)
+                record("render.gather", enqueue(q, g, scatter_size if scatter else pixel_size,
+                                                ls))
         self._stats_evt = cl.enqueue_copy(q, self._stats_host, self.stats, is_blocking=False)
+
+    def _upload_inputs(self) -> None:
+        """Copy the camera and the RenderParams record to the device when they changed."""
+        cam = self.camera.tobytes()
+        sc = self.scene
+        key = (sc.sky, tuple(sc.ambient), len(sc.lights), len(sc.materials))
+        if key != self._params_key:
+            self._params_key, self._params_rec = key, np.array([self.params()])
+        prm = self._params_rec.tobytes()
+        old_cam, old_prm = self._uploaded
+        q = self.rt.queue
+        if cam != old_cam:
+            cl.enqueue_copy(q, self.camera_buf, np.frombuffer(cam, np.uint8), is_blocking=False)
+        if prm != old_prm:
+            cl.enqueue_copy(q, self.params_buf, np.frombuffer(prm, np.uint8), is_blocking=False)
+        self._uploaded = (cam, prm)
 
     def _level_hint(self) -> int:
         """Depth levels to launch: the deepest level with rays in the last frame whose counts

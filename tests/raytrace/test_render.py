@@ -261,3 +261,58 @@ def test_adaptive_depth_launches_only_needed_levels_and_matches(rt):
         assert st["levels"] == (12 if frame == 0 else needed)
         assert st["untraced"] == 0
         np.testing.assert_array_equal(adapt.read_framebuffer(), ref_fb)
+
+
+def test_multi_block_compaction_equals_small_chunks(rt):
+    """Wavefronts of several scan blocks (the last block scans the block totals) give the same
+    image, ray counts and pixel-sorted wavefronts as chunks small enough for one block."""
+    from raytrace.render_types import SCAN_BLOCK
+
+    sc = tiny_scene(rt)
+    kw = dict(width=40, height=32, spp=4, bounces=2, adaptive_depth=False)
+    whole = Renderer(rt, sc, RenderSettings(**kw))
+    small = Renderer(rt, sc, RenderSettings(**kw, max_chunk_rays=256))
+    for r in (whole, small):
+        r.set_camera((0.5, 1.5, 3.0), (0, 0.3, 0), (0, 1, 0), 50)
+        r.render()
+    assert len(whole.chunks) == 1 and len(small.chunks) == 20
+    counts = rt.to_host(whole.counts, np.uint32, 3)
+    assert counts[0] > 4 * SCAN_BLOCK and counts[1] > SCAN_BLOCK and counts[2] > 0
+    for depth, buf in ((1, whole.rays[1]), (2, whole.rays[0])):  # the ping-pong buffers
+        kids = rt.to_host(buf, RAY, int(counts[depth]))
+        assert np.all(np.diff(kids["pixel"].astype(np.int64)) >= 0)
+        assert (kids["wr"] + kids["wg"] + kids["wb"] > 0).all()  # no gap left unwritten
+    st_w, st_s = whole.read_stats(), small.read_stats()
+    assert st_w["rays_per_depth"] == st_s["rays_per_depth"] and st_w["dropped"] == 0
+    assert st_w["rays_per_depth"][1:] == [int(counts[1]), int(counts[2])]
+    np.testing.assert_array_equal(whole.read_framebuffer(), small.read_framebuffer())
+    np.testing.assert_array_equal(whole.read_rgba(), small.read_rgba())
+
+
+@pytest.mark.parametrize("n", [0, 5, 1024, 1025, 5000, 70000])
+def test_scan_kernel_offsets_counts_and_stats(rt, n):
+    """render_scan in one launch: exclusive offsets (block offset + offset in block) equal
+    NumPy's cumulative sum, the total becomes the next count and the stats, the ticket is 0."""
+    import pyopencl as cl
+
+    from raytrace.render_types import SCAN_BLOCK, SCAN_WG, STATS_LEN
+
+    k = cl.Kernel(rt.program("render_secondary.cl"), "render_scan")
+    cc = np.random.default_rng(n).integers(0, 3, max(n, 1)).astype(np.uint32)
+    child = rt.to_device(cc)
+    counts = rt.to_device(np.array([n, 0, 0], np.uint32))
+    blocks = max(1, -(-n // SCAN_BLOCK))
+    sums = rt.buffer(4 * blocks)
+    ticket = rt.to_device(np.zeros(1, np.uint32))
+    stats = rt.to_device(np.zeros(STATS_LEN, np.uint32))
+    total = int(cc[:n].sum())
+    k.set_args(child, counts, np.uint32(0), np.uint32(max(total - 3, 0)), sums, ticket, stats)
+    cl.enqueue_nd_range_kernel(rt.queue, k, ((blocks + 1) * SCAN_WG,), (SCAN_WG,))
+    off = rt.to_host(child, np.uint32, max(n, 1))[:n].astype(np.int64)
+    off += rt.to_host(sums, np.uint32, blocks)[np.arange(n) // SCAN_BLOCK]
+    np.testing.assert_array_equal(off, np.cumsum(cc[:n], dtype=np.int64) - cc[:n])
+    kept = max(total - 3, 0)
+    assert rt.to_host(counts, np.uint32, 3)[1] == kept
+    st = rt.to_host(stats, np.uint32, STATS_LEN)
+    assert (st[0], st[1], st[-1]) == (n, kept, total - kept)
+    assert rt.to_host(ticket, np.uint32, 1)[0] == 0
