@@ -28,14 +28,14 @@ SEED_MS = {
 }
 SEED_BYTES_PER_RAY = 144
 
-#: Our stage names -> the seed's table columns. Shadow rays are traced inside render.shade (one
-#: launch per depth level), so the seed's "shadows" and "shading" share one column.
+#: Our stage names -> the seed's table columns (with fuse_trace_shade, render.trace and
+#: render.trace_secondary include the shading of their hits).
 COLUMNS = {
     "ray_creation": ("render.raygen",),
     "primary_trace": ("render.trace",),
+    "shadows": ("render.shadow",),
     "secondary_trace": ("render.trace_secondary",),
-    "shading_shadows": ("render.shade",),
-    "compaction_gather": ("render.secondary", "render.gather"),
+    "shading": ("render.shade", "render.secondary", "render.gather"),
 }
 
 
@@ -53,6 +53,8 @@ def add_arguments(p) -> None:
     p.add_argument("--reference-spp", type=int, default=256)
     p.add_argument("--local-sizes", type=int, nargs="+", default=[64, 128, 256],
                    help="work-group sizes tried; the table reports the fastest")
+    p.add_argument("--fuse", default="both", choices=["both", "on", "off"],
+                   help="fuse_trace_shade settings tried (both: the table reports the fastest)")
 
 
 def _frame_times(rt, renderer, repeats: int, warmup: int, enqueue_ms: list | None = None
@@ -78,12 +80,13 @@ def _frame_times(rt, renderer, repeats: int, warmup: int, enqueue_ms: list | Non
     return {k: statistics.median(v) for k, v in stages.items()}, statistics.median(walls)
 
 
-def _with_local_size(rt, rs, renderer, ls: int):
+def _with_local_size(rt, rs, renderer, ls: int, fused: bool):
     import dataclasses
 
     from raytrace.render import Renderer
 
-    r = Renderer(rt, rs, dataclasses.replace(renderer.settings, local_size=ls))
+    r = Renderer(rt, rs, dataclasses.replace(renderer.settings, local_size=ls,
+                                             fuse_trace_shade=fused))
     r.set_camera_record(renderer.camera)
     return r
 
@@ -136,14 +139,16 @@ def run(args) -> int:
             rs, renderer, _ = _build(name, rt, (size, size))
             rs.update()
             by_ls = {}
-            for ls in args.local_sizes:  # the same scene, each work-group size
-                r_ls = renderer if ls == renderer.settings.local_size else _with_local_size(
-                    rt, rs, renderer, ls)
+            fuse = {"both": (False, True), "on": (True,), "off": (False,)}[args.fuse]
+            variants = [(ls, f) for f in fuse for ls in args.local_sizes]
+            for ls, f in variants:  # the same scene, each work-group size and fusion
+                r_ls = renderer if (ls, f) == (renderer.settings.local_size, False) else \
+                    _with_local_size(rt, rs, renderer, ls, f)
                 r_ls.enqueue_frame(update_scene=False)
                 rt.finish()
                 enq: list[float] = []
-                by_ls[ls] = (*_frame_times(rt, r_ls, args.repeats, args.warmup, enq), r_ls,
-                             statistics.median(enq))
+                by_ls[(ls, f)] = (*_frame_times(rt, r_ls, args.repeats, args.warmup, enq),
+                                  r_ls, statistics.median(enq))
             best = min(by_ls, key=lambda k: by_ls[k][1])
             stages, wall, renderer, enqueue = by_ls[best]
             stats = renderer.read_stats()
@@ -157,8 +162,9 @@ def run(args) -> int:
             gpu_total = sum(stages.values())
             row = {"scene": name, "size": size, "triangles": rs.n_triangles,
                    "bounces": renderer.settings.bounces, "levels": stats["levels"],
-                   "local_size": best,
-                   "wall_ms_by_local_size": {k: round(v[1], 4) for k, v in by_ls.items()}}
+                   "local_size": best[0], "fuse_trace_shade": best[1],
+                   "wall_ms_by_variant": {f"ls{k[0]}{'_fused' if k[1] else ''}": round(v[1], 4)
+                                          for k, v in by_ls.items()}}
             for col, names in COLUMNS.items():
                 row[f"{col}_ms"] = round(sum(stages.get(n, 0.0) for n in names), 4)
             row |= {"kernel_total_ms": round(gpu_total, 4), "wall_ms": round(wall, 4),
@@ -176,7 +182,8 @@ def run(args) -> int:
             print(f"{name:7s} {size:5d}^2 wall {wall:8.3f} ms  ({1000 / wall:8.1f} FPS)  "
                   f"kernels {gpu_total:8.3f} ms  enqueue {enqueue:6.3f} ms  "
                   f"secondary {stats['secondary_rays']:9d}  seed {seed} ms  "
-                  f"x{row['speedup_fps']}  ls {best}  {row['stages_ms']}", flush=True)
+                  f"x{row['speedup_fps']}  ls {best[0]} fused {best[1]}  {row['stages_ms']}",
+                  flush=True)
             _write(out, rt, check_rt, date, args, rows, [])
     conv = _convergence(rt, args) if args.convergence_scene else []
     _write(out, rt, check_rt, date, args, rows, conv)
@@ -197,7 +204,7 @@ def _write(out: Path, rt, check_rt, date: str, args, rows: list, conv: list) -> 
             "seed_bytes_per_ray": SEED_BYTES_PER_RAY}
     write_json(out / "render.json", {"meta": meta, "scenes": rows, "convergence": conv})
     write_csv(out / "render.csv", [{k: v for k, v in r.items()
-                                    if k not in ("stages_ms", "wall_ms_by_local_size")}
+                                    if k not in ("stages_ms", "wall_ms_by_variant")}
                                    for r in rows])
 
 

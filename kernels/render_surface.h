@@ -152,6 +152,46 @@ inline int spawn_children(const Ray* r, const Surface* s, float3 w, uint depth,
     return n;
 }
 
+/* Shading of ray i of the wavefront with its closest hit h (no shadow rays: render_shadow):
+ * ambient, sky on a miss, Beer-Lambert, the child count for the compaction, the primary AOV. */
+inline void shade_hit(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                      __constant const Camera* cam, const Ray r, const Hit h, uint i,
+                      const uint depth, __global float4* restrict radiance,
+                      __global uint* restrict child_counts, __global Aov* restrict aov,
+                      const uint write_aov)
+{
+    float3 L;
+    uint n_children = 0;
+    Aov a = {(float4)(0.0f), INFINITY, -1, -1, -1};
+    if (h.prim < 0) {
+        const float3 w = attenuated_weight(&r, INFINITY, g_mat);
+        const float3 d = ray_dir(&r);
+        L = max3(w) > 0.0f ? w * (prm->sky == SKY_CUBEMAP ? sky_cubemap(d, prm, g_tex, g_texels)
+                                                          : sky_procedural(d, prm))
+                           : (float3)(0.0f);
+    } else {
+        const Surface s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
+        const Material m = g_mat[s.material];
+        const float3 w = attenuated_weight(&r, h.t, g_mat);
+        L = w * direct_fraction(&m) * prm->ambient.xyz * s.kd;
+        Ray kids[2];
+        n_children = (uint)spawn_children(&r, &s, w, depth, prm, g_mat, kids);
+        float3 nf_g, nf_s;
+        facing_normals(&s, ray_dir(&r), &nf_g, &nf_s);
+        a.normal = (float4)(nf_s, 0.0f);
+        a.depth = h.t;
+        a.prim = h.prim;
+        a.inst = h.inst;
+        a.material = s.material;
+    }
+    radiance[i] = (float4)(L, 0.0f);
+    child_counts[i] = n_children;
+    if (write_aov && depth == 0 && r.sample == 0) {
+        uint x, y;
+        if (pixel_of(cam, r.pixel, &x, &y)) aov[y * cam->width + x] = a;
+    }
+}
+
 /* Writes ray i's children into the next wavefront at its compacted offset: the exclusive offset
  * within its scan block (child_offsets[i]) plus the block's offset (block_sums, render_scan). */
 inline void scatter_children(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,

@@ -7,16 +7,18 @@ the ray buffers would not fit in device memory):
     render.raygen      primary rays, 8x8 tiles in Morton order, spp per pixel, weight 1/spp
     per depth 0..levels (levels: bounces, or as many as the last frame needed):
       render.trace     closest hit (render.trace_secondary for depth >= 1)
-      render.shade     ambient, sky on a miss, Beer-Lambert, shadow rays and Phong direct light,
-                       child counts, primary AOVs
+      render.shade     ambient, sky on a miss, Beer-Lambert, child counts, primary AOVs
+      render.shadow    shadow rays and Phong direct light per light
       render.secondary prefix-sum compaction offsets of the reflection/refraction children (one
                        launch: block scans, the last block scans the block totals)
       render.gather    children scattered into the next wavefront; each pixel gathers its rays'
                        radiance (rays stay sorted by pixel); after the last level, tonemap + sRGB
 
-Four launches per depth level. Every kernel object belongs to this renderer (one per depth
+Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
+the shading). Every kernel object belongs to this renderer (one per depth
 level) and its arguments are bound when the scene's buffers change, so a frame is mostly bare
-enqueues from Python.
+enqueues from Python. Per-ray kernels loop with a grid stride over the device-side count and
+are launched for about the last frame's count rather than every slot.
 
 Only the RGBA8 image is read back (:meth:`Renderer.read_rgba`); ray counts stay on the device
 and are read on request (:meth:`Renderer.read_stats`, used by the benchmark).
@@ -74,6 +76,7 @@ class RenderSettings:
     aov: bool = False             #: write primary depth/normal/prim/inst per pixel
     adaptive_depth: bool = True   #: launch only as many levels as the last frame needed
     local_size: int = 64          #: work-group size of the per-ray and per-pixel stages
+    fuse_trace_shade: bool = False  #: one kernel traces and shades (render.trace includes shade)
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -193,32 +196,54 @@ class Renderer:
         self._params_key = self._params_rec = None
         ls = s.local_size
 
-        # per-ray and per-pixel kernels loop with a grid stride, so they are launched with at
-        # most about one wave of work-items (2048 per compute unit) whatever the slot count
-        cap_items = -(-rt.device.max_compute_units * 2048 // ls) * ls
+        self._count_hint: tuple | None = None  # rays per depth of the last frame that arrived
+        self._sizes: dict = {}
 
-        def rnd(n: int) -> tuple:
-            return (min(-(-int(n) // ls) * ls, cap_items),)
+        def rnd(n: int) -> int:
+            return -(-int(n) // ls) * ls
 
-        # per chunk: q0, n_q, primary rays, raygen size, and per depth level the sizes of
-        # trace/shade (ray slots), scan (work-groups x SCAN_WG), gather (scattering: ray slots;
-        # the last level: pixels)
+        # per chunk: q0, n_q, primary rays, raygen size, and per depth level the ray slots that
+        # can be in use (work-items of trace/shade/shadow, rounded to the work-group size), the
+        # scan size (work-groups x SCAN_WG) and the pixels (rounded)
         self._plan = []
         for q0, nq in self.chunks:
             n_rays = nq * s.spp
             depths, launch_n = [], n_rays
             for _ in range(s.bounces + 1):
                 blocks = max(1, -(-launch_n // SCAN_BLOCK))
-                depths.append((rnd(launch_n), (blocks * SCAN_WG,), rnd(max(launch_n, nq)),
-                               rnd(nq)))
+                depths.append((rnd(launch_n), (blocks * SCAN_WG,), rnd(nq)))
                 launch_n = min(self.capacity, 2 * launch_n)
             self._plan.append((q0, nq, n_rays, (max(n_rays, STATS_LEN),), depths))
+
+    def _launch_sizes(self, depths: list, hint: tuple | None) -> list:
+        """Per depth level: (rays work-items, scan size, gather size scattering, gather size on
+        the last level). The per-ray kernels loop with a grid stride over the device-side count,
+        so any size is correct; with the last frame's counts (one chunk) a level is launched
+        for 5/4 of them (at least 1/8 of its slots) instead of all its slots, which are mostly
+        empty past depth 0 (reflections and refractions double the slots, not the rays)."""
+        key = (id(depths), hint)
+        sizes = self._sizes.get(key)
+        if sizes is None:
+            ls = self.settings.local_size
+            sizes = []
+            for d, (slots, scan, pixels) in enumerate(depths):
+                n = slots
+                if d > 0 and hint is not None and d < len(hint):
+                    want = max(hint[d] * 5 // 4 + ls, slots // 8)
+                    n = min(slots, -(-want // ls) * ls)
+                sizes.append(((n,), scan, (max(n, pixels),), (pixels,)))
+            if len(self._sizes) > 64:
+                self._sizes.clear()
+            self._sizes[key] = sizes
+        return sizes
 
     def _depth_kernels(self, depth: int) -> dict:
         while len(self._k) <= depth:
             p = self._programs
             self._k.append({"trace": cl.Kernel(p["render_trace.cl"], "render_trace"),
                             "shade": cl.Kernel(p["render_shade.cl"], "render_shade"),
+                            "shadow": cl.Kernel(p["render_shade.cl"], "render_shadow"),
+                            "trace_shade": cl.Kernel(p["render_trace.cl"], "render_trace_shade"),
                             "scan": cl.Kernel(p["render_secondary.cl"], "render_scan"),
                             "gather": cl.Kernel(p["render_frame.cl"], "render_gather")})
             self._bound_sig = None
@@ -243,9 +268,13 @@ class Renderer:
         for d, k in enumerate(self._k):
             rays, out, dd = self.rays[d % 2], self.rays[(d + 1) % 2], u32(d)
             k["trace"].set_args(*scene_args, rays, self.counts, dd, self.hits)
-            k["shade"].set_args(*scene_args, *geom, self.params_buf, self.camera_buf,
-                                self.scene.light_buf, rays, self.hits, self.counts, dd,
-                                self.radiance, self.child, self.aov, u32(s.aov))
+            k["shade"].set_args(*geom, self.params_buf, self.camera_buf, rays, self.hits,
+                                self.counts, dd, self.radiance, self.child, self.aov, u32(s.aov))
+            k["trace_shade"].set_args(*scene_args, *geom, self.params_buf, self.camera_buf,
+                                      rays, self.counts, dd, self.hits, self.radiance,
+                                      self.child, self.aov, u32(s.aov))
+            k["shadow"].set_args(*scene_args, *geom, self.params_buf, self.scene.light_buf, rays,
+                                 self.hits, self.counts, dd, self.radiance)
             k["scan"].set_args(self.child, self.counts, dd, u32(self.capacity), self.block_sums,
                                self.ticket, self.stats)
             k["gather"].set_args(*geom, self.params_buf, self.camera_buf, rays, self.hits,
@@ -322,19 +351,26 @@ class Renderer:
         ks, setv, record, enqueue = self._k, self._set, rt.timer.record, cl.enqueue_nd_range_kernel
         ls = (s.local_size,)
         scan_ls = (SCAN_WG,)
+        has_lights = len(self.scene.lights) > 0
+        fused = s.fuse_trace_shade
+        hint = self._count_hint if len(self._plan) == 1 else None
         for q0, nq, n_rays, raygen_size, depths in self._plan:
+            sizes = self._launch_sizes(depths, hint)
             setv(self.k_raygen, 1, q0)
             setv(self.k_raygen, 2, n_rays)
             setv(self.k_raygen, 6, int(q0 == 0))
             record("render.raygen", enqueue(q, self.k_raygen, raygen_size, None))
             for depth in range(bounces + 1):
                 k = ks[depth]
-                ray_size, scan_size, scatter_size, pixel_size = depths[depth]
+                ray_size, scan_size, scatter_size, pixel_size = sizes[depth]
                 record("render.trace_secondary" if depth else "render.trace",
-                       enqueue(q, k["trace"], ray_size, ls))
+                       enqueue(q, k["trace_shade" if fused else "trace"], ray_size, ls))
                 if depth == 0 and q0 == 0:
                     q.flush()  # the device starts while the rest is enqueued
-                record("render.shade", enqueue(q, k["shade"], ray_size, ls))
+                if not fused:
+                    record("render.shade", enqueue(q, k["shade"], ray_size, ls))
+                if has_lights:
+                    record("render.shadow", enqueue(q, k["shadow"], ray_size, ls))
                 if depth < deepest:  # the last launched level still counts its children
                     record("render.secondary", enqueue(q, k["scan"], scan_size, scan_ls))
                 g = k["gather"]
@@ -371,6 +407,7 @@ class Renderer:
         evt = self._stats_evt
         if evt is None or evt.command_execution_status != cl.command_execution_status.COMPLETE:
             return self.settings.bounces if evt is None else self._levels
+        self._count_hint = tuple(int(x) for x in self._stats_host[: self.settings.bounces + 1])
         deep = [d for d in range(1, self.settings.bounces + 1) if self._stats_host[d] > 0]
         return max(deep, default=0)
 

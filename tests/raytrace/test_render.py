@@ -77,8 +77,9 @@ def compare_with_reference(rt, settings, eye=(0.5, 1.5, 3.0), target=(0, 0.3, 0)
     return stats
 
 
-def test_matches_float64_pipeline_with_reflection_and_refraction(rt):
-    s = RenderSettings(width=24, height=20, spp=1, bounces=3)
+@pytest.mark.parametrize("fused", [False, True], ids=["trace+shade", "trace_shade"])
+def test_matches_float64_pipeline_with_reflection_and_refraction(rt, fused):
+    s = RenderSettings(width=24, height=20, spp=1, bounces=3, fuse_trace_shade=fused)
     stats = compare_with_reference(rt, s)
     # reflective and refractive bounces happened: children at depths 1..3
     assert stats["rays_per_depth"][1] > 50 and stats["rays_per_depth"][3] > 0
@@ -170,14 +171,15 @@ def test_flat_water_snell_fresnel_tir(rt, from_below):
         assert n_tir == 0
 
 
-def test_aov_equals_intersect_on_camera_rays(rt):
+@pytest.mark.parametrize("fused", [False, True], ids=["trace+shade", "trace_shade"])
+def test_aov_equals_intersect_on_camera_rays(rt, fused):
     from app.meshes import load_mesh
     from raytrace import intersect
 
     V, F = load_mesh("bunny_5k.obj")
     sc = RenderScene(rt)
     sc.add_instance(sc.add_mesh(V, F))
-    s = RenderSettings(width=48, height=40, spp=1, bounces=0, aov=True)
+    s = RenderSettings(width=48, height=40, spp=1, bounces=0, aov=True, fuse_trace_shade=fused)
     r = Renderer(rt, sc, s)
     c = V.mean(axis=0)
     ext = float(np.ptp(V, axis=0).max())
@@ -285,8 +287,17 @@ def test_multi_block_compaction_equals_small_chunks(rt):
     st_w, st_s = whole.read_stats(), small.read_stats()
     assert st_w["rays_per_depth"] == st_s["rays_per_depth"] and st_w["dropped"] == 0
     assert st_w["rays_per_depth"][1:] == [int(counts[1]), int(counts[2])]
-    np.testing.assert_array_equal(whole.read_framebuffer(), small.read_framebuffer())
+    fb = whole.read_framebuffer()
+    np.testing.assert_array_equal(fb, small.read_framebuffer())
     np.testing.assert_array_equal(whole.read_rgba(), small.read_rgba())
+    # launched for far fewer work-items than rays (a stale count hint): the grid-stride loops
+    # still trace, shade and gather every ray
+    whole._count_hint = (0, 0, 0)
+    sizes = whole._launch_sizes(whole._plan[0][4], whole._count_hint)
+    assert sizes[1][0][0] < counts[1]
+    whole.render()
+    np.testing.assert_array_equal(whole.read_framebuffer(), fb)
+    assert whole.read_stats()["rays_per_depth"] == st_w["rays_per_depth"]
 
 
 @pytest.mark.parametrize("n", [0, 5, 1024, 1025, 5000, 70000])
