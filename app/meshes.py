@@ -87,25 +87,14 @@ def _read_with_pyvista(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def validate_mesh(vertices: np.ndarray, triangles: np.ndarray, name: str = "mesh"
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Return C-contiguous float32 (n,3) / uint32 (m,3) copies or raise a one-line error."""
-    v = np.asarray(vertices)
-    t = np.asarray(triangles)
-    if v.ndim != 2 or v.shape[1] != 3:
-        raise InputError(f"{name}: vertices must have shape (n, 3), got {v.shape}")
-    if t.ndim != 2 or t.shape[1] != 3:
-        raise InputError(f"{name}: triangles must have shape (m, 3), got {t.shape}")
-    if len(t) == 0:
-        raise InputError(f"{name}: no triangles")
-    if not np.issubdtype(t.dtype, np.integer):
-        raise InputError(f"{name}: triangles must be integers, got {t.dtype}")
-    if t.min() < 0 or t.max() >= len(v):
-        raise InputError(f"{name}: triangle indices must lie in [0, {len(v) - 1}], "
-                         f"got [{t.min()}, {t.max()}]")
-    v = np.ascontiguousarray(v, dtype=np.float32)
-    if not np.isfinite(v).all():
-        bad = int(np.flatnonzero(~np.isfinite(v).all(axis=1))[0])
-        raise InputError(f"{name}: vertex {bad} has a non-finite coordinate {v[bad].tolist()}")
-    return v, np.ascontiguousarray(t, dtype=np.uint32)
+    """Return C-contiguous float32 (n,3) / uint32 (m,3) copies or raise a one-line InputError
+    (the checks are :func:`raytrace.bvh.check_mesh_arrays`', the BVH's own)."""
+    from raytrace.bvh import check_mesh_arrays
+
+    try:
+        return check_mesh_arrays(vertices, triangles, name)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
 
 
 def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
