@@ -2,7 +2,9 @@
 exact workload of NVIDIA Warp's anchor script (``../shared/bench/warp_anchor.py``: height-field
 grids of n x n vertices, a 1920x1080 camera, 2^21 incoherent downward rays), build times of the
 seed's meshes, the device radix sort against ``pyopencl.algorithm.RadixSort``, and (where embreex is
-installed) Embree's single-thread ray rate on the same rays.
+installed) Embree's single-thread ray rate on the same rays. On a CPU device it also times the GPU
+flavour of the traversal (``-DTRACE_CPU=0``, kernels/traverse.h) on the same rays and reports rays
+per second of process CPU time (the host may be shared) beside the wall-clock rates.
 
 Times are medians over ``--reps`` after one warm-up: ``*_ms`` wall clock from the first enqueue to
 the end of ``queue.finish()`` (as Warp's script measures), ``*_gpu_ms`` the sum of the OpenCL
@@ -164,12 +166,14 @@ def embree_rate(vertices, triangles, o, d) -> dict | None:
                                    triangles.astype(np.int32))
     o32, d32 = np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
     scene.run(o32[:1000], d32[:1000], query="INTERSECT", output=1)  # warm-up (build)
-    best = np.inf
+    best = best_cpu = np.inf
     for _ in range(2):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         res = scene.run(o32, d32, query="INTERSECT", output=1)
         best = min(best, time.perf_counter() - t0)
-    return {"Mrays_s": len(o) / best / 1e6, "prim": np.asarray(res["primID"])}
+        best_cpu = min(best_cpu, time.process_time() - c0)
+    return {"Mrays_s": len(o) / best / 1e6, "Mrays_per_cpu_s": len(o) / best_cpu / 1e6,
+            "prim": np.asarray(res["primID"])}
 
 
 # -- the benchmark ------------------------------------------------------------------------------
@@ -206,11 +210,29 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
         hits_buf = rt.buffer(HIT_DTYPE.itemsize * len(o))
         q = RayQuery(scene, rt.to_device(ro), rt.to_device(rd), hits_buf, len(o),
                      stage="bench.trace")
+        c0 = time.process_time()
         wall, gpu, _ = timed(rt, lambda q=q: q.enqueue(args.local_size), args.reps)
+        cpu_s = (time.process_time() - c0) / (args.reps + 1)  # all host threads, per trace
         hits = rt.to_host(hits_buf, HIT_DTYPE, len(o))
         scene.check()
         row[f"{kind}_Mrays_s"] = len(o) / wall / 1e3
         row[f"{kind}_gpu_Mrays_s"] = len(o) / gpu / 1e3
+        if not rt.is_gpu:
+            # the host is shared: rays per second of CPU time this process used (PoCL's
+            # threads included) is less sensitive to other processes than the wall clock
+            row[f"{kind}_Mrays_per_cpu_s"] = len(o) / cpu_s / 1e6
+        if args.compare_generic and not rt.is_gpu:
+            # the same kernel with the GPU flavour of traverse.h (TRACE_CPU=0), same rays
+            qg = RayQuery(scene, q.org, q.dirs, rt.buffer(HIT_DTYPE.itemsize * len(o)),
+                          len(o), stage="bench.trace_generic", defines={"TRACE_CPU": 0})
+            c0 = time.process_time()
+            gwall, _, _ = timed(rt, lambda qg=qg: qg.enqueue(args.local_size), args.reps)
+            g_cpu_s = (time.process_time() - c0) / (args.reps + 1)
+            ghits = rt.to_host(qg.hits, HIT_DTYPE, len(o))
+            row[f"{kind}_generic_Mrays_s"] = len(o) / gwall / 1e3
+            row[f"{kind}_generic_Mrays_per_cpu_s"] = len(o) / g_cpu_s / 1e6
+            row[f"{kind}_generic_same_hits"] = float(np.mean(ghits["prim"] == hits["prim"]))
+            del qg
         row[f"{kind}_hit_frac"] = float((hits["prim"] >= 0).mean())
         chk = check_grid_hits(n, vertices, triangles, o, d, hits, 1e6, args.check_rays)
         row.update({f"{kind}_{k}": v for k, v in chk.items()})
@@ -228,10 +250,20 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
             emb = embree_rate(vertices, triangles, o, d)
             if emb is not None:
                 row[f"{kind}_embree_1t_Mrays_s"] = emb["Mrays_s"]
+                row[f"{kind}_embree_1t_Mrays_per_cpu_s"] = emb["Mrays_per_cpu_s"]
                 row[f"{kind}_vs_embree_1t"] = row[f"{kind}_Mrays_s"] / emb["Mrays_s"]
                 row[f"{kind}_embree_prim_agreement"] = float(np.mean(emb["prim"] ==
                                                                      hits["prim"]))
                 msg += f"; embree 1 thread {emb['Mrays_s']:.1f} Mrays/s"
+        if f"{kind}_generic_Mrays_s" in row:
+            msg += (f"; TRACE_CPU=0 {row[f'{kind}_generic_Mrays_s']:.2f} Mrays/s (same hits "
+                    f"{row[f'{kind}_generic_same_hits']:.6f})")
+        if f"{kind}_Mrays_per_cpu_s" in row:
+            msg += f"; per CPU-second: ours {row[f'{kind}_Mrays_per_cpu_s']:.2f}"
+            if f"{kind}_generic_Mrays_per_cpu_s" in row:
+                msg += f", TRACE_CPU=0 {row[f'{kind}_generic_Mrays_per_cpu_s']:.2f}"
+            if f"{kind}_embree_1t_Mrays_per_cpu_s" in row:
+                msg += f", embree {row[f'{kind}_embree_1t_Mrays_per_cpu_s']:.2f}"
         log(msg)
         del q, hits_buf
     if args.sort_compare:
@@ -371,6 +403,9 @@ def add_arguments(p) -> None:
                    help="grid vertices per side of the sweep (default: %(default)s)")
     p.add_argument("--sweep-wg", default="32,64,128,256",
                    help="trace work-group sizes for --sweep-leaf (default: %(default)s)")
+    p.add_argument("--no-compare-generic", dest="compare_generic", action="store_false",
+                   help="on a CPU device, skip timing the GPU flavour of the traversal "
+                        "(TRACE_CPU=0) beside the CPU one")
     p.add_argument("--reference-sah", action="store_true",
                    help="also build a CPU binned-SAH tree of each mesh for its SAH cost (slow)")
 

@@ -21,6 +21,36 @@
 #define TRAVERSE_FP64 1
 #endif
 
+/* TRACE_CPU selects the scalar-CPU flavour of two details (the hits are the same): slab
+   min/max as compare-selects, which a CPU compiler turns into single min/max instructions where
+   PoCL's fmin/fmax are out-of-line calls with NaN handling (the slab distances are never NaN:
+   finite boxes and origins, reciprocals finite and non-zero), and a prefetch of both inner
+   children as soon as their parent is read, so their cache misses overlap the box tests (one
+   ray per work-item runs as scalar code on a CPU, so nothing else hides that latency). It
+   defaults to 1 when the OpenCL C compiler targets a CPU instruction set (PoCL compiles for the
+   host: x86-64, AArch64) and 0 otherwise (NVIDIA: nvptx, whose code is unchanged);
+   -DTRACE_CPU=0 or 1 overrides it (the benchmark compares both). */
+#ifndef TRACE_CPU
+#if defined(__x86_64__) || defined(__i386__) || defined(__aarch64__)
+#define TRACE_CPU 1
+#else
+#define TRACE_CPU 0
+#endif
+#endif
+#if TRACE_CPU
+#define TRACE_MIN(a, b) ((a) < (b) ? (a) : (b))
+#define TRACE_MAX(a, b) ((a) > (b) ? (a) : (b))
+/* PoCL 3.0's OpenCL prefetch() emits nothing; clang's builtin emits a prefetch instruction. */
+#if defined(__clang__)
+#define TRACE_PREFETCH(p) __builtin_prefetch((const __global void*)(p))
+#else
+#define TRACE_PREFETCH(p) prefetch((const __global char*)(p), 64)
+#endif
+#else
+#define TRACE_MIN(a, b) fmin(a, b)
+#define TRACE_MAX(a, b) fmax(a, b)
+#endif
+
 #define TRACE_STACK 64
 /* 1 + 2 gamma(3), gamma(n) = n eps / (1 - n eps), eps = 2^-24 */
 #define TRACE_BOX_GROW 1.0000003576278687f
@@ -68,10 +98,10 @@ inline TraceRay trace_ray_setup(float3 org, float3 dir) {
 /* Entry distance of the ray into [lo, hi] within [tmin, tmax], or INFINITY when it misses. */
 inline float trace_box(float3 lo, float3 hi, const TraceRay* r, float tmin, float tmax) {
     float3 t0 = (lo - r->org) * r->idir, t1 = (hi - r->org) * r->idir;
-    float3 tn = fmin(t0, t1), tf = fmax(t0, t1);
-    float tnear = fmax(fmax(tn.x, tn.y), fmax(tn.z, tmin));
-    float tfar = fmin(fmin(tf.x, tf.y), tf.z) * TRACE_BOX_GROW;
-    tfar = fmin(tfar, tmax);
+    float3 tn = TRACE_MIN(t0, t1), tf = TRACE_MAX(t0, t1);
+    float tnear = TRACE_MAX(TRACE_MAX(tn.x, tn.y), TRACE_MAX(tn.z, tmin));
+    float tfar = TRACE_MIN(TRACE_MIN(tf.x, tf.y), tf.z) * TRACE_BOX_GROW;
+    tfar = TRACE_MIN(tfar, tmax);
     return tnear <= tfar ? tnear : INFINITY;
 }
 
@@ -124,6 +154,10 @@ inline bool trace_blas(__global const BvhNode* restrict nodes,
         float4 a = n->lo_l, b = n->hi_l, c = n->lo_r, d = n->hi_r;
         int cl = as_int(b.w), cr = as_int(d.w);
         int rl = as_int(a.w), rr = as_int(c.w);
+#if TRACE_CPU
+        if (cl == 0) TRACE_PREFETCH(nodes + rl);
+        if (cr == 0) TRACE_PREFETCH(nodes + rr);
+#endif
         float tl = cl >= 0 ? trace_box(a.xyz, b.xyz, r, tmin, *tmax) : INFINITY;
         float tr = cr >= 0 ? trace_box(c.xyz, d.xyz, r, tmin, *tmax) : INFINITY;
         for (int side = 0; side < 2; ++side) {

@@ -44,10 +44,12 @@ class RayQuery:
     """Closest-hit or any-hit queries of device rays against a scene (kernels bound once)."""
 
     def __init__(self, scene: Scene, org: cl.Buffer, dirs: cl.Buffer, hits: cl.Buffer, n: int,
-                 *, any_hit: bool = False, stage: str = "trace"):
+                 *, any_hit: bool = False, stage: str = "trace", defines: dict | None = None):
+        """``defines``: extra build defines of ``trace_query.cl`` (e.g. ``{"TRACE_CPU": 0}``
+        to time the GPU flavour of the traversal on a CPU; see kernels/traverse.h)."""
         self.rt, self.n, self.stage = scene.rt, int(n), stage
         name = "trace_any" if any_hit else "trace_closest"
-        self._k = cl.Kernel(scene.rt.program("trace_query.cl"), name)
+        self._k = cl.Kernel(scene.rt.program("trace_query.cl", defines), name)
         self._k.set_args(*scene.trace_args(), np.int32(n), org, dirs, hits)
         # kernel arguments hold no references: keep the buffers alive as long as the query
         self._scene, self.org, self.dirs, self.hits = scene, org, dirs, hits
