@@ -40,8 +40,9 @@
 #if TRACE_CPU
 #define TRACE_MIN(a, b) ((a) < (b) ? (a) : (b))
 #define TRACE_MAX(a, b) ((a) > (b) ? (a) : (b))
-/* PoCL 3.0's OpenCL prefetch() emits nothing; clang's builtin emits a prefetch instruction. */
-#if defined(__clang__)
+/* PoCL 3.0's OpenCL prefetch() emits nothing; clang's builtin emits a prefetch instruction on a
+   CPU target (NVIDIA's compiler is clang-based too but rejects it for __global pointers). */
+#if defined(__clang__) && (defined(__x86_64__) || defined(__i386__) || defined(__aarch64__))
 #define TRACE_PREFETCH(p) __builtin_prefetch((const __global void*)(p))
 #else
 #define TRACE_PREFETCH(p) prefetch((const __global char*)(p), 64)
