@@ -4,6 +4,7 @@
 #ifndef LBWATER_BVH_HIERARCHY_H
 #define LBWATER_BVH_HIERARCHY_H
 
+#include "common.h"
 #include "bvh.h"
 
 #ifdef cl_khr_fp64
@@ -154,9 +155,10 @@ inline void bvh_walk(int i, int n, int leaf_size, int node_base, int prim_base,
             p->lo_r = (float4)(lo, as_float(ref));
             p->hi_r = (float4)(hi, as_float(count));
         }
-        mem_fence(CLK_GLOBAL_MEM_FENCE);
+        DEVICE_FENCE(); /* our box is visible to the sibling's work-group before the flag */
         int other = atomic_xchg(flags + parent, is_left ? l : r);
         if (other < 0) return; /* first to arrive: the sibling finishes the parent */
+        DEVICE_FENCE(); /* and the sibling's box is read after the flag */
         flags[parent] = -1;
         volatile __global float4* pv = (volatile __global float4*)p;
         float4 slo = is_left ? pv[2] : pv[0];

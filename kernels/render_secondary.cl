@@ -52,9 +52,9 @@ void render_scan(__global uint* child_counts, __global uint* counts, const uint 
     }
     if (lid == RENDER_SCAN_WG - 1) {
         block_sums[grp] = tmp[lid];
-        mem_fence(CLK_GLOBAL_MEM_FENCE);           /* the total is visible before the ticket */
+        DEVICE_FENCE();                            /* the total is visible before the ticket */
         is_last = atomic_inc(ticket) == n_blocks - 1u;
-        mem_fence(CLK_GLOBAL_MEM_FENCE);
+        DEVICE_FENCE();
     }
     barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
     /* the last block scans the block totals, all of them published by now (a loop of zero

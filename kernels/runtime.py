@@ -80,6 +80,8 @@ class Runtime:
             raise KernelBuildError(f"kernel source {path} does not exist")
         options = [f"-I{KERNEL_DIR}", f"-DLBWATER_SRC_HASH=0x{self._hash}",
                    "-cl-std=CL1.2"]
+        if "nvidia" in self.device.platform.name.lower():
+            options.append("-DLBWATER_NVIDIA=1")  # common.h: DEVICE_FENCE
         options += [_format_define(k, v) for k, v in key[1]]
         text = f'#line 1 "{path.name}"\n' + path.read_text()
         try:

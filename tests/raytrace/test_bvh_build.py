@@ -74,3 +74,22 @@ def test_grid_refit_after_deformation(rt):
     # same topology: the same leaves in the same places
     assert np.array_equal(rep["leaf_first"], before["leaf_first"])
     assert rep["n_nodes"] == before["n_nodes"]
+
+
+def test_rebuild_and_refit_are_bit_identical(rt):
+    """Build and refit are deterministic, so repeats must match the first build node for node:
+    a race between work-groups in the bottom-up pass shows up here (bench/stress_bvh.py runs the
+    same check at 2M+ triangles on a GPU, where such races first appeared)."""
+    from app.meshes import height_field_grid
+    from raytrace import Scene
+
+    v, t = height_field_grid(65)
+    scene = Scene(rt)
+    scene.add_instance(scene.add_mesh(v, t))
+    scene.update()
+    blas = scene.blas(0)
+    first = blas.host_arrays()["nodes"].copy()
+    for kind in ("rebuild", "refit", "rebuild", "refit"):
+        getattr(blas, kind)()
+        nodes = blas.host_arrays()["nodes"]
+        assert np.array_equal(nodes.view(np.uint8), first.view(np.uint8)), kind
