@@ -142,6 +142,25 @@ inline void trace_push(int* stack, int* sp, int node, __global int* restrict tra
     else atomic_inc(trace_stats + TRACE_STAT_OVERFLOW);
 }
 
+/* The next node after visiting one: the nearer of the children hit (gl, gr at distances tl, tr),
+   the farther one pushed; with neither, pop. False when the stack is empty (traversal done). */
+inline bool trace_next(bool gl, bool gr, float tl, float tr, int rl, int rr, int* stack, int* sp,
+                       int* node, __global int* restrict trace_stats) {
+    if (gl && gr) {
+        bool left_first = tl <= tr;
+        trace_push(stack, sp, left_first ? rr : rl, trace_stats);
+        *node = left_first ? rl : rr;
+    } else if (gl) {
+        *node = rl;
+    } else if (gr) {
+        *node = rr;
+    } else {
+        if (*sp == 0) return false;
+        *node = stack[--*sp];
+    }
+    return true;
+}
+
 /* One mesh's BVH from `root`. Shrinks *tmax to each closer hit and records it in *hit. */
 inline bool trace_blas(__global const BvhNode* restrict nodes,
                        __global const BvhTri* restrict tris, int root, const TraceRay* r,
@@ -184,18 +203,7 @@ inline bool trace_blas(__global const BvhNode* restrict nodes,
         }
         /* tl is INFINITY on a miss: the strict test also drops boxes now behind a closer hit */
         bool gl = cl == 0 && tl < *tmax, gr = cr == 0 && tr < *tmax;
-        if (gl && gr) {
-            bool left_first = tl <= tr;
-            trace_push(stack, &sp, left_first ? rr : rl, trace_stats);
-            node = left_first ? rl : rr;
-        } else if (gl) {
-            node = rl;
-        } else if (gr) {
-            node = rr;
-        } else {
-            if (sp == 0) break;
-            node = stack[--sp];
-        }
+        if (!trace_next(gl, gr, tl, tr, rl, rr, stack, &sp, &node, trace_stats)) break;
     }
     return found;
 }
@@ -247,18 +255,7 @@ inline bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float 
             }
         }
         bool gl = cl == 0 && tl < tbest, gr = cr == 0 && tr < tbest;
-        if (gl && gr) {
-            bool left_first = tl <= tr;
-            trace_push(stack, &sp, left_first ? rr : rl, trace_stats);
-            node = left_first ? rl : rr;
-        } else if (gl) {
-            node = rl;
-        } else if (gr) {
-            node = rr;
-        } else {
-            if (sp == 0) break;
-            node = stack[--sp];
-        }
+        if (!trace_next(gl, gr, tl, tr, rl, rr, stack, &sp, &node, trace_stats)) break;
     }
     return found;
 }
