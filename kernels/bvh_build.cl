@@ -1,8 +1,8 @@
 /* LBVH over a triangle mesh on the device (raytrace.bvh.Blas). Launch order of a build:
-     bvh_reset_info -> bvh_tri_bounds -> bvh_tri_morton -> sort (sort_*.cl) -> bvh_tri_gather
-     -> bvh_hierarchy_tris
-   A refit (same topology, moved vertices) is bvh_reset_info(keep bounds) -> bvh_tri_gather ->
-   bvh_hierarchy_tris on the stored sorted keys and order.
+     bvh_reset_info -> bvh_tri_bounds -> bvh_tri_morton -> sort (sort_*.cl) ->
+     bvh_gather_hierarchy
+   A refit (same topology, moved vertices) is bvh_reset_info(keep bounds) -> bvh_gather_hierarchy
+   on the stored sorted keys and order.
    Inputs: vertices as float4 (w ignored), triangles as 3 x uint32 (packed, 12 bytes). */
 #include "bvh_hierarchy.h"
 
@@ -70,14 +70,12 @@ __kernel void bvh_tri_morton(__global const float4* restrict verts,
     vals[t] = t;
 }
 
-/* Triangles in sorted (leaf) order with their vertices gathered: out[tri_base + i]. Counts
-   triangles with a non-finite vertex in the header. */
-__kernel void bvh_tri_gather(__global const float4* restrict verts,
-                             __global const uint* restrict tris, uint n_tris, uint nv,
-                             __global const uint* restrict order, __global BvhTri* restrict out,
-                             int tri_base, __global BvhInfo* infos, int info_index) {
-    uint i = get_global_id(0);
-    if (i >= n_tris) return;
+/* Triangle i of the sorted order gathered into out[tri_base + i] (leaf order, its original index
+   in p0.w); returns its box. Counts triangles with a non-finite vertex in the header. */
+inline void gather_triangle(__global const float4* restrict verts,
+                            __global const uint* restrict tris, uint nv,
+                            __global const uint* restrict order, __global BvhTri* restrict out,
+                            int tri_base, __global BvhInfo* info, int i, float3* lo, float3* hi) {
     uint t = order[i];
     float4 a, b, c;
     load_triangle(verts, tris, nv, t, &a, &b, &c);
@@ -86,37 +84,36 @@ __kernel void bvh_tri_gather(__global const float4* restrict verts,
     bt.p1 = (float4)(b.xyz, 0.0f);
     bt.p2 = (float4)(c.xyz, 0.0f);
     out[tri_base + i] = bt;
-    if (!(finite3(a.xyz) && finite3(b.xyz) && finite3(c.xyz)))
-        atomic_inc(&infos[info_index].n_bad);
+    if (!(finite3(a.xyz) && finite3(b.xyz) && finite3(c.xyz))) atomic_inc(&info->n_bad);
+    *lo = fmin(fmin(a.xyz, b.xyz), c.xyz);
+    *hi = fmax(fmax(a.xyz, b.xyz), c.xyz);
 }
 
-inline void tri_box(__global const BvhTri* restrict prims, int k, float3* lo, float3* hi) {
-    float3 a = prims[k].p0.xyz, b = prims[k].p1.xyz, c = prims[k].p2.xyz;
-    *lo = fmin(fmin(a, b), c);
-    *hi = fmax(fmax(a, b), c);
-}
-
-/* Hierarchy and boxes in one bottom-up pass over the gathered triangles (see bvh_walk). */
-__kernel void bvh_hierarchy_tris(int n, int leaf_size, int node_base, int prim_base,
-                                 __global const uint* restrict keys,
-                                 __global const BvhTri* restrict prims, __global BvhNode* nodes,
-                                 __global int* flags, __global BvhInfo* infos, int info_index) {
+/* Gather and hierarchy in one launch: each work-item gathers its sorted triangle, then walks up
+   the tree with its box (see bvh_walk), so a refit is this kernel after the header reset. */
+__kernel void bvh_gather_hierarchy(__global const float4* restrict verts,
+                                   __global const uint* restrict tris, int n, uint nv,
+                                   __global const uint* restrict order,
+                                   __global BvhTri* restrict prims, int leaf_size, int node_base,
+                                   int prim_base, __global const uint* restrict keys,
+                                   __global BvhNode* nodes, __global int* flags,
+                                   __global BvhInfo* infos, int info_index) {
     int i = get_global_id(0);
     if (i >= n) return;
+    __global BvhInfo* info = infos + info_index;
     float3 lo, hi;
-    if (n <= leaf_size) {
+    if (n <= leaf_size) { /* one leaf: work-item 0 gathers all and writes the root */
         if (i != 0) return;
-        tri_box(prims, prim_base, &lo, &hi);
+        gather_triangle(verts, tris, nv, order, prims, prim_base, info, 0, &lo, &hi);
         for (int k = 1; k < n; ++k) {
             float3 a, b;
-            tri_box(prims, prim_base + k, &a, &b);
+            gather_triangle(verts, tris, nv, order, prims, prim_base, info, k, &a, &b);
             lo = fmin(lo, a);
             hi = fmax(hi, b);
         }
-        bvh_small_root(n, node_base, prim_base, nodes, infos + info_index, lo, hi);
+        bvh_small_root(n, node_base, prim_base, nodes, info, lo, hi);
         return;
     }
-    tri_box(prims, prim_base + i, &lo, &hi);
-    bvh_walk(i, n, leaf_size, node_base, prim_base, keys, nodes, flags, infos + info_index, lo,
-             hi);
+    gather_triangle(verts, tris, nv, order, prims, prim_base, info, i, &lo, &hi);
+    bvh_walk(i, n, leaf_size, node_base, prim_base, keys, nodes, flags, info, lo, hi);
 }

@@ -161,11 +161,9 @@ class Blas:
         self._k_bounds = k("bvh_tri_bounds", v, t, n, nv, s.infos, idx)
         self._k_morton = k("bvh_tri_morton", v, t, n, nv, s.infos, idx, np.int32(self.key_bits),
                            self.keys, self.order)
-        self._k_gather = k("bvh_tri_gather", v, t, n, nv, self.order, s.tris,
-                           np.int32(s.tri_base), s.infos, idx)
-        self._k_hier = k("bvh_hierarchy_tris", np.int32(n), np.int32(self.leaf_size),
-                         np.int32(s.node_base), np.int32(s.tri_base), self.keys, s.tris, s.nodes,
-                         self.flags, s.infos, idx)
+        self._k_hier = k("bvh_gather_hierarchy", v, t, np.int32(n), nv, self.order, s.tris,
+                         np.int32(self.leaf_size), np.int32(s.node_base), np.int32(s.tri_base),
+                         self.keys, s.nodes, self.flags, s.infos, idx)
         groups = min(-(-self.n_triangles // BOUNDS_WG), 4 * self.rt.device.max_compute_units * 8)
         rt, st, nt = self.rt, self.stage, self.n_triangles
         self._reset_build = Launch(rt, f"{st}.reset", self._k_reset_build, 1)
@@ -173,7 +171,6 @@ class Blas:
         self._bounds = Launch(rt, f"{st}.bounds", self._k_bounds, max(groups, 1) * BOUNDS_WG,
                               BOUNDS_WG)
         self._morton = Launch(rt, f"{st}.morton", self._k_morton, nt, 64)
-        self._gather = Launch(rt, f"{st}.gather", self._k_gather, nt, 64)
         self._hier = Launch(rt, f"{st}.hierarchy", self._k_hier, nt, 64)
 
     # -- device work (enqueue only) -----------------------------------------------------------
@@ -188,7 +185,7 @@ class Blas:
         self._morton()
         self.rt.queue.flush()  # let the device start while the sort is being enqueued
         self._sorter.enqueue()
-        self._enqueue_gather_and_hierarchy()
+        self._hier()  # gather + bottom-up boxes in one launch
         self.built = True
 
     def refit(self) -> None:
@@ -202,11 +199,7 @@ class Blas:
             self.rebuild()
             return
         self._reset_refit()
-        self._enqueue_gather_and_hierarchy()
-
-    def _enqueue_gather_and_hierarchy(self) -> None:
-        self._gather()
-        self._hier()
+        self._hier()  # gather + bottom-up boxes in one launch
 
     # -- host inspection (synchronises; not for the frame loop) -------------------------------
     def info(self) -> np.void:
