@@ -27,19 +27,19 @@ inline uint packed_count(ulong packed, uint d) {
     return (uint)(packed >> (4 * d)) & 15u;
 }
 
-/* Exclusive scan over the RADIX_WG values `v` (one per thread); returns this thread's prefix and
-   the total through *total. Hillis-Steele in local memory. */
-inline uint wg_exclusive_scan(uint v, __local uint* tmp, uint* total) {
+/* Exclusive scan over the `width` values `v` (one per thread of a work-group of that size);
+   returns this thread's prefix and the total through *total. Hillis-Steele in local memory. */
+inline uint wg_exclusive_scan(uint v, __local uint* tmp, int width, uint* total) {
     int lid = get_local_id(0);
     tmp[lid] = v;
     barrier(CLK_LOCAL_MEM_FENCE);
-    for (int off = 1; off < RADIX_WG; off <<= 1) {
+    for (int off = 1; off < width; off <<= 1) {
         uint add = lid >= off ? tmp[lid - off] : 0u;
         barrier(CLK_LOCAL_MEM_FENCE);
         tmp[lid] += add;
         barrier(CLK_LOCAL_MEM_FENCE);
     }
-    *total = tmp[RADIX_WG - 1];
+    *total = tmp[width - 1];
     uint incl = tmp[lid];
     barrier(CLK_LOCAL_MEM_FENCE);
     return incl - v;
@@ -83,19 +83,8 @@ void radix_scan(uint len, __global uint* counts) {
             if (j + 1 < len) v.y = counts[j + 1];
             if (j + 2 < len) v.z = counts[j + 2];
         }
-        uint s = v.x + v.y + v.z + v.w;
-        /* Hillis-Steele over the per-thread sums */
-        tmp[lid] = s;
-        barrier(CLK_LOCAL_MEM_FENCE);
-        for (int off = 1; off < SCAN_WG; off <<= 1) {
-            uint add = lid >= off ? tmp[lid - off] : 0u;
-            barrier(CLK_LOCAL_MEM_FENCE);
-            tmp[lid] += add;
-            barrier(CLK_LOCAL_MEM_FENCE);
-        }
-        uint total = tmp[SCAN_WG - 1];
-        uint pre = carry + tmp[lid] - s;
-        barrier(CLK_LOCAL_MEM_FENCE);
+        uint total;
+        uint pre = carry + wg_exclusive_scan(v.x + v.y + v.z + v.w, tmp, SCAN_WG, &total);
         uint4 o = (uint4)(pre, pre + v.x, pre + v.x + v.y, pre + v.x + v.y + v.z);
         if (j + 3 < len) vstore4(o, 0, counts + j);
         else {
@@ -182,7 +171,7 @@ void radix_scatter(uint n, uint shift, __global const uint* restrict keys_in,
         s += hist[lid * RADIX + q];
     }
     uint total;
-    uint pre = wg_exclusive_scan(s, tmp, &total);
+    uint pre = wg_exclusive_scan(s, tmp, RADIX_WG, &total);
     for (int q = 0; q < RADIX; ++q) hist[lid * RADIX + q] = pre + run[q];
     barrier(CLK_LOCAL_MEM_FENCE);
     if (lid < RADIX) dstart[lid] = hist[lid * RADIX_WG];

@@ -90,6 +90,14 @@ def _vec3(v, what: str) -> np.ndarray:
     return a
 
 
+def _per_vertex(values, nv: int, width: int, what: str) -> np.ndarray:
+    """``values`` as float32 (nv, width), or a one-line ValueError."""
+    a = np.asarray(values, np.float32).reshape(-1, width)
+    if len(a) != nv or not np.isfinite(a).all():
+        raise ValueError(f"{what} must be {nv} finite {width}-vectors")
+    return a
+
+
 def _unit(v, what: str) -> np.ndarray:
     a = _vec3(v, what)
     n = np.linalg.norm(a)
@@ -174,15 +182,11 @@ class RenderScene:
         if normals is not None:
             flags |= MESH_HAS_NORMALS
             if not isinstance(normals, cl.Buffer):
-                n_host = np.asarray(normals, np.float32).reshape(-1, 3)
-                if len(n_host) != nv or not np.isfinite(n_host).all():
-                    raise ValueError(f"normals must be {nv} finite 3-vectors")
+                n_host = _per_vertex(normals, nv, 3, "normals")
         uv_host = None
         if uvs is not None:
             flags |= MESH_HAS_UVS
-            uv_host = np.asarray(uvs, np.float32).reshape(-1, 2)
-            if len(uv_host) != nv or not np.isfinite(uv_host).all():
-                raise ValueError(f"uvs must be {nv} finite 2-vectors")
+            uv_host = _per_vertex(uvs, nv, 2, "uvs")
         tm = None
         if tri_materials is not None:
             flags |= MESH_TRI_MATERIALS

@@ -39,6 +39,14 @@ def _perturbed(sim, rng, h, u, v):
     return f * (1.0 + 0.02 * rng.standard_normal(f.shape))
 
 
+def _load_perturbed(sim, rng, h, u, v, bed=None):
+    """Set the state, then overwrite the populations with perturbed ones; returns them."""
+    sim.set_state(h, u, v, bed)
+    f = _perturbed(sim, rng, h, u, v)
+    sim._load_populations(f)
+    return f
+
+
 @pytest.mark.parametrize("header, name, dtype", STRUCTS, ids=[s[1] for s in STRUCTS])
 def test_struct_layout_matches_dtype(rt, header, name, dtype):
     check_struct(rt, header, name, dtype)
@@ -53,9 +61,7 @@ def test_steps_match_reference(rt, boundary, bed_on):
     sim = lbm.ShallowWater(NX, NY, DX, boundary=boundary, device=rt, drag=2.0,
                            viscosity=2e-3)
     h, u, v, bed = _random_state(rng, bed_on)
-    sim.set_state(h, u, v, bed)
-    f = _perturbed(sim, rng, h, u, v)
-    sim._load_populations(f)
+    f = _load_perturbed(sim, rng, h, u, v, bed)
     f = f.astype(np.float32).astype(np.float64)
     h_prev = f.sum(0)
     lat = sim.lattice
@@ -104,9 +110,7 @@ def test_drop_matches_reference(rt):
     rng = np.random.default_rng(3)
     sim = lbm.ShallowWater(NX, NY, DX, device=rt, viscosity=2e-3)
     h, u, v, _ = _random_state(rng, False)
-    sim.set_state(h, 0.3 * u, 0.3 * v)
-    f = _perturbed(sim, rng, h, 0.3 * u, 0.3 * v)
-    sim._load_populations(f)
+    f = _load_perturbed(sim, rng, h, 0.3 * u, 0.3 * v)
     sim.add_drop(0.31, 0.2, 0.17, 0.08)
     f_ref, _, hit = ref.drop(f.astype(np.float32), x=0.31, y=0.2, radius=0.17, height=0.08,
                              dx=DX, **_params(sim), limits=_limits(sim))
@@ -135,9 +139,7 @@ def test_push_matches_reference(rt, strength):
     rng = np.random.default_rng(5)
     sim = lbm.ShallowWater(NX, NY, DX, device=rt, viscosity=2e-3)
     h, u, v, _ = _random_state(rng, False)
-    sim.set_state(h, 0.2 * u, 0.2 * v)
-    f = _perturbed(sim, rng, h, 0.2 * u, 0.2 * v)
-    sim._load_populations(f)
+    f = _load_perturbed(sim, rng, h, 0.2 * u, 0.2 * v)
     sim.push(0.12, 0.1, 0.3, 0.15, strength, radius=0.13)
     f_ref, _, hit = ref.push(f.astype(np.float32), x=0.12, y=0.1, ddx=0.3, ddy=0.15,
                              strength=strength, radius=0.13, dx=DX, **_params(sim),
