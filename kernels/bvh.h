@@ -45,11 +45,53 @@ typedef struct {
     int4 cmax;
 } BvhInfo;
 
+/* The wide layout for CPU devices (TRACE_WIDE, raytrace/bvh_wide.py): the binary tree collapsed
+   into 8-wide nodes whose child boxes are stored as planes across the children (SoA), so one
+   ray tests all eight with a few float8 operations, and leaves stored as blocks of 4 triangles in
+   SoA, tested with float4 operations. A CPU runs one ray per work-item as scalar code: the width
+   has to come from inside the ray's own work (Embree's single-ray layout). */
+#define WIDE_WIDTH 8
+#define WIDE_BLOCK 4
+/* Levels of a wide tree (it is never deeper than its binary tree, whose depth the builder bounds
+   by 62 (raytrace.bvh.expected_depth_bound: 32 key bits + 30 index bits). */
+#define WIDE_MAX_LEVELS 64
+
+/* 256 bytes. plane[a] holds axis a%3 of the children's lower (a < 3) or upper (a >= 3) corner.
+   cnt > 0: a leaf of cnt triangles in the (cnt + 3) / 4 blocks from block `ref` (absolute);
+   cnt == 0: an inner child, `ref` its absolute wide node index; cnt < 0: no child (its box is
+   empty: lower +inf, upper -inf, so no ray enters it). */
+typedef struct {
+    float8 plane[6];
+    int8 ref;
+    int8 cnt;
+} WideNode;
+
+/* 160 bytes: 4 triangles of one leaf, v[vertex][axis] across the 4 lanes; lanes past the leaf's
+   end repeat its first triangle (the same hit, never a false one). prim: input-order index. */
+typedef struct {
+    float4 v[3][3];
+    int4 prim;
+} TriBlock;
+
+/* Per-BVH header of the wide tree's build (272 bytes): wide nodes per level (level 0 is the
+   root; a level's nodes follow the previous level's, so node i of level L is at
+   sum(level_count[0..L-1]) + i), their sum (written by the refit), blocks used, and
+   truncated = 1 if a node of the last level had an inner child (never expected, see
+   WIDE_MAX_LEVELS). */
+typedef struct {
+    int level_count[WIDE_MAX_LEVELS];
+    int n_nodes;
+    int n_blocks;
+    int truncated;
+    int pad;
+} WideInfo;
+
 /* One instance of a mesh, filled on the device by the TLAS build from the host's transform
    (64 bytes). object_from_world: rows of the inverse affine transform (a ray is moved into the
    mesh's space with it; t is unchanged by an affine map). blas_root: root node of the mesh's BVH in
-   the scene's node array (-1: empty mesh). mesh: mesh id. prim_base: the mesh's first triangle in
-   the scene-wide numbering (sum of the triangle counts of the meshes added before it). */
+   the scene's node array, binary or wide by the scene's layout (-1: empty mesh). mesh: mesh id.
+   prim_base: the mesh's first triangle in the scene-wide numbering (sum of the triangle counts of
+   the meshes added before it). */
 typedef struct {
     float4 object_from_world[3];
     int blas_root;

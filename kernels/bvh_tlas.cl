@@ -5,13 +5,16 @@
 
 /* Instance records and world boxes from world_from_object transforms (3 float4 rows each:
    xyz = the 3x3 part, w = translation) and each mesh's BLAS header (root and object box). The
+   BLAS root is the binary root of the header, or with `wide` the mesh's wide root. The
    inverse is computed here in float with cofactors; the host rejects singular transforms. The
    world box is Arvo's transformed box, widened by a few ulps of its magnitude so rounding never
    makes it smaller than the moved geometry. */
 __kernel __attribute__((reqd_work_group_size(BOUNDS_WG, 1, 1)))
 void tlas_prep(int n_inst, __global const float4* restrict xforms,
                __global const int* restrict inst_mesh, __global const int* restrict mesh_prim_base,
-               __global const BvhInfo* restrict blas_infos, __global Instance* restrict instances,
+               __global const BvhInfo* restrict blas_infos,
+               __global const int* restrict mesh_wide_root, int wide,
+               __global Instance* restrict instances,
                __global float4* restrict boxes, __global BvhInfo* tlas_info) {
     __local float lmin[3 * BOUNDS_WG], lmax[3 * BOUNDS_WG];
     int i = get_global_id(0);
@@ -32,7 +35,7 @@ void tlas_prep(int n_inst, __global const float4* restrict xforms,
         ins.object_from_world[0] = (float4)(q0, -dot(q0, t));
         ins.object_from_world[1] = (float4)(q1, -dot(q1, t));
         ins.object_from_world[2] = (float4)(q2, -dot(q2, t));
-        ins.blas_root = bi.root;
+        ins.blas_root = bi.root >= 0 && wide ? mesh_wide_root[mesh] : bi.root;
         ins.mesh = mesh;
         ins.prim_base = mesh_prim_base[mesh];
         ins.pad = 0;

@@ -45,7 +45,12 @@ def _format_define(name: str, value) -> str:
 class Runtime:
     """A device, its context and its profiling queue; builds and caches programs and kernels."""
 
-    def __init__(self, device: cl.Device | str | None = None, *, profiling: bool = True):
+    def __init__(self, device: cl.Device | str | None = None, *, profiling: bool = True,
+                 bvh_layout: str | None = None):
+        """``bvh_layout``: how scenes store their BLASes for traversal, ``"binary"`` or
+        ``"wide"`` (raytrace.bvh_wide); default ``LBWATER_BVH_LAYOUT`` or, unset, binary on a GPU
+        and wide on a CPU. Every program is built with the matching ``TRACE_WIDE`` define unless
+        its defines name one."""
         self.device = device if isinstance(device, cl.Device) else select_device(device)
         self.context = cl.Context([self.device])
         props = cl.command_queue_properties.PROFILING_ENABLE if profiling else 0
@@ -54,6 +59,11 @@ class Runtime:
         self._programs: dict[tuple, cl.Program] = {}
         self._kernels: dict[tuple, cl.Kernel] = {}
         self._hash = _source_hash()
+        layout = bvh_layout or os.environ.get("LBWATER_BVH_LAYOUT") or (
+            "binary" if self.is_gpu else "wide")
+        if layout not in ("binary", "wide"):
+            raise ValueError(f"BVH layout must be binary or wide, got {layout!r}")
+        self.bvh_layout = layout
 
     # -- facts ------------------------------------------------------------------------------
     @property
@@ -71,7 +81,8 @@ class Runtime:
     # -- builds -----------------------------------------------------------------------------
     def program(self, source: str, defines: dict | None = None) -> cl.Program:
         """The built program for ``kernels/<source>`` with ``defines``; built once per key."""
-        key = (source, tuple(sorted((defines or {}).items())))
+        defines = {"TRACE_WIDE": int(self.bvh_layout == "wide"), **(defines or {})}
+        key = (source, tuple(sorted(defines.items())))
         prg = self._programs.get(key)
         if prg is not None:
             return prg

@@ -12,13 +12,28 @@
    tlas_prims : instance ids in top-level leaf order;
    instances  : Instance records by instance id;
    blas_nodes : every mesh's nodes in one array (instances hold their root index);
-   blas_tris  : every mesh's triangles in one array, in leaf order;
+   blas_tris  : every mesh's triangles in one array, in leaf order (wide: in blocks);
    trace_stats: [0] counts traversal-stack overflows (never expected: the stack is deeper than
                 any tree the builder can make; a non-zero count means hits may be missing). */
+/* TRACE_WIDE picks the BLAS layout the kernels read; the host passes it (kernels.runtime adds
+   the runtime's layout to every build, raytrace.scene.Scene.trace_defines names the scene's):
+   0: binary nodes (BvhNode) and leaf-ordered triangles (BvhTri), the GPU layout;
+   1: 8-wide nodes (WideNode) and 4-triangle blocks (TriBlock), the CPU layout. */
+#ifndef TRACE_WIDE
+#define TRACE_WIDE 0
+#endif
+#if TRACE_WIDE
+#define BLAS_NODE WideNode
+#define BLAS_PRIM TriBlock
+#else
+#define BLAS_NODE BvhNode
+#define BLAS_PRIM BvhTri
+#endif
+
 #define SCENE_PARAMS                                                                            \
     __global const BvhInfo* restrict tlas_info, __global const BvhNode* restrict tlas_nodes,    \
     __global const int* restrict tlas_prims, __global const Instance* restrict instances,       \
-    __global const BvhNode* restrict blas_nodes, __global const BvhTri* restrict blas_tris,     \
+    __global const BLAS_NODE* restrict blas_nodes, __global const BLAS_PRIM* restrict blas_tris, \
     __global int* restrict trace_stats
 
 #define SCENE_ARGS tlas_info, tlas_nodes, tlas_prims, instances, blas_nodes, blas_tris, trace_stats

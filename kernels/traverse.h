@@ -7,7 +7,12 @@
    Traversal: both child boxes per node, leaves tested when met, near child first, one stack per
    level of TRACE_STACK entries. The builder's trees are at most 64 levels deep (bvh_delta), so the
    stack cannot overflow; the guard still counts an overflow in trace_stats instead of writing
-   past the stack, so it could never be silent. */
+   past the stack, so it could never be silent.
+   The BLAS layout is TRACE_WIDE's (scene.h): binary nodes as above (GPUs), or 8-wide nodes and
+   4-triangle blocks (CPUs): eight slab tests in float8, four triangle tests in float4 with the
+   same arithmetic per lane, children pushed with their entry distance and popped nearest first;
+   its stack holds (WIDE_WIDTH - 1) entries per level of the at most 64, so it cannot overflow
+   either, and the same guard counts it. The TLAS is binary in both. */
 #ifndef LBWATER_TRAVERSE_H
 #define LBWATER_TRAVERSE_H
 
@@ -52,6 +57,14 @@
 #define TRACE_MAX(a, b) fmax(a, b)
 #endif
 
+/* PoCL builds with -Dinline= and leaves helper functions out of line; on a CPU every call in
+   this loop costs as much as a box test, so force them inline there (GPU code is unchanged). */
+#if TRACE_CPU
+#define TRACE_INLINE inline __attribute__((always_inline))
+#else
+#define TRACE_INLINE inline
+#endif
+
 #define TRACE_STACK 64
 /* 1 + 2 gamma(3), gamma(n) = n eps / (1 - n eps), eps = 2^-24 */
 #define TRACE_BOX_GROW 1.0000003576278687f
@@ -64,16 +77,16 @@ typedef struct {
     float sx, sy, sz;
 } TraceRay;
 
-inline float trace_axis(float3 v, int k) {
+TRACE_INLINE float trace_axis(float3 v, int k) {
     return k == 0 ? v.x : (k == 1 ? v.y : v.z);
 }
 
-inline float trace_safe_rcp(float d) {
+TRACE_INLINE float trace_safe_rcp(float d) {
     /* a zero component becomes a huge finite reciprocal: no 0 * inf = NaN in the slab test */
     return 1.0f / (fabs(d) > 1e-30f ? d : copysign(1e-30f, d));
 }
 
-inline TraceRay trace_ray_setup(float3 org, float3 dir) {
+TRACE_INLINE TraceRay trace_ray_setup(float3 org, float3 dir) {
     TraceRay r;
     r.org = org;
     r.idir = (float3)(trace_safe_rcp(dir.x), trace_safe_rcp(dir.y), trace_safe_rcp(dir.z));
@@ -97,7 +110,7 @@ inline TraceRay trace_ray_setup(float3 org, float3 dir) {
 }
 
 /* Entry distance of the ray into [lo, hi] within [tmin, tmax], or INFINITY when it misses. */
-inline float trace_box(float3 lo, float3 hi, const TraceRay* r, float tmin, float tmax) {
+TRACE_INLINE float trace_box(float3 lo, float3 hi, const TraceRay* r, float tmin, float tmax) {
     float3 t0 = (lo - r->org) * r->idir, t1 = (hi - r->org) * r->idir;
     float3 tn = TRACE_MIN(t0, t1), tf = TRACE_MAX(t0, t1);
     float tnear = TRACE_MAX(TRACE_MAX(tn.x, tn.y), TRACE_MAX(tn.z, tmin));
@@ -107,8 +120,8 @@ inline float trace_box(float3 lo, float3 hi, const TraceRay* r, float tmin, floa
 }
 
 /* Watertight ray-triangle test. On a hit in [tmin, tmax) writes t and Embree barycentrics. */
-inline bool trace_triangle(const TraceRay* r, float3 p0, float3 p1, float3 p2, float tmin,
-                           float tmax, float* t_out, float* u_out, float* v_out) {
+TRACE_INLINE bool trace_triangle(const TraceRay* r, float3 p0, float3 p1, float3 p2, float tmin,
+                                 float tmax, float* t_out, float* u_out, float* v_out) {
     float3 A = p0 - r->org, B = p1 - r->org, C = p2 - r->org;
     float az = trace_axis(A, r->kz), bz = trace_axis(B, r->kz), cz = trace_axis(C, r->kz);
     float ax = trace_axis(A, r->kx) - r->sx * az, ay = trace_axis(A, r->ky) - r->sy * az;
@@ -137,15 +150,15 @@ inline bool trace_triangle(const TraceRay* r, float3 p0, float3 p1, float3 p2, f
     return true;
 }
 
-inline void trace_push(int* stack, int* sp, int node, __global int* restrict trace_stats) {
+TRACE_INLINE void trace_push(int* stack, int* sp, int node, __global int* restrict trace_stats) {
     if (*sp < TRACE_STACK) stack[(*sp)++] = node;
     else atomic_inc(trace_stats + TRACE_STAT_OVERFLOW);
 }
 
 /* The next node after visiting one: the nearer of the children hit (gl, gr at distances tl, tr),
    the farther one pushed; with neither, pop. False when the stack is empty (traversal done). */
-inline bool trace_next(bool gl, bool gr, float tl, float tr, int rl, int rr, int* stack, int* sp,
-                       int* node, __global int* restrict trace_stats) {
+TRACE_INLINE bool trace_next(bool gl, bool gr, float tl, float tr, int rl, int rr, int* stack,
+                             int* sp, int* node, __global int* restrict trace_stats) {
     if (gl && gr) {
         bool left_first = tl <= tr;
         trace_push(stack, sp, left_first ? rr : rl, trace_stats);
@@ -161,11 +174,223 @@ inline bool trace_next(bool gl, bool gr, float tl, float tr, int rl, int rr, int
     return true;
 }
 
+#if TRACE_WIDE
+#ifndef TRACE_WIDE_PREFETCH /* 0 turns the prefetch of the next nodes off */
+#define TRACE_WIDE_PREFETCH 1
+#endif
+/* Each wide level pushes at most WIDE_WIDTH - 1 children and pops one. */
+#ifndef TRACE_WIDE_STACK
+#define TRACE_WIDE_STACK ((WIDE_WIDTH - 1) * WIDE_MAX_LEVELS)
+#endif
+
+/* Vector lanes by index without vstore (a library call on PoCL). */
+typedef union {
+    float4 v;
+    float a[4];
+} TraceLanes4;
+typedef union {
+    int4 v;
+    int a[4];
+} TraceLanes4i;
+typedef union {
+    float8 v;
+    float a[8];
+} TraceLanes8;
+typedef union {
+    int8 v;
+    int a[8];
+} TraceLanes8i;
+
+/* any() of a comparison result, without the library call */
+TRACE_INLINE bool trace_any4(int4 m) {
+    return (m.x | m.y | m.z | m.w) != 0;
+}
+
+/* Four triangles of a block at once: the same watertight test as trace_triangle, lane by lane
+   (same operations in the same order, so the same hits), including its float64 re-evaluation of
+   exact-zero edge functions. Shrinks *tmax to the closest hit in [tmin, *tmax) and records it. */
+TRACE_INLINE bool trace_block(__global const TriBlock* restrict b, const TraceRay* r, float tmin,
+                              float* tmax, Hit* hit, int inst) {
+    float4 ox = (float4)(trace_axis(r->org, r->kx)), oy = (float4)(trace_axis(r->org, r->ky)),
+           oz = (float4)(trace_axis(r->org, r->kz));
+    float4 az = b->v[0][r->kz] - oz, bz = b->v[1][r->kz] - oz, cz = b->v[2][r->kz] - oz;
+    float4 sx = (float4)(r->sx), sy = (float4)(r->sy);
+    float4 ax = (b->v[0][r->kx] - ox) - sx * az, ay = (b->v[0][r->ky] - oy) - sy * az;
+    float4 bx = (b->v[1][r->kx] - ox) - sx * bz, by = (b->v[1][r->ky] - oy) - sy * bz;
+    float4 cx = (b->v[2][r->kx] - ox) - sx * cz, cy = (b->v[2][r->ky] - oy) - sy * cz;
+    float4 U = cx * by - cy * bx;
+    float4 V = ax * cy - ay * cx;
+    float4 W = bx * ay - by * ax;
+#ifdef TRAVERSE_FP64
+    if (trace_any4((U == 0.0f) | (V == 0.0f) | (W == 0.0f))) {
+        TraceLanes4 u = {.v = U}, v = {.v = V}, w = {.v = W}, pax = {.v = ax}, pay = {.v = ay},
+                    pbx = {.v = bx}, pby = {.v = by}, pcx = {.v = cx}, pcy = {.v = cy};
+        for (int j = 0; j < 4; ++j) {
+            if (u.a[j] == 0.0f || v.a[j] == 0.0f || w.a[j] == 0.0f) {
+                double dax = pax.a[j], day = pay.a[j], dbx = pbx.a[j], dby = pby.a[j],
+                       dcx = pcx.a[j], dcy = pcy.a[j];
+                u.a[j] = (float)(dcx * dby - dcy * dbx);
+                v.a[j] = (float)(dax * dcy - day * dcx);
+                w.a[j] = (float)(dbx * day - dby * dax);
+            }
+        }
+        U = u.v;
+        V = v.v;
+        W = w.v;
+    }
+#endif
+    int4 outside = ((U < 0.0f) | (V < 0.0f) | (W < 0.0f)) & ((U > 0.0f) | (V > 0.0f) | (W > 0.0f));
+    float4 det = U + V + W;
+    float4 sz = (float4)(r->sz);
+    float4 T = U * (sz * az) + V * (sz * bz) + W * (sz * cz);
+    float4 rcp = 1.0f / det;
+    float4 t = T * rcp;
+    int4 ok = ~outside & (det != 0.0f) & (t >= (float4)(tmin)) & (t < (float4)(*tmax));
+    if (!trace_any4(ok)) return false;
+    TraceLanes4 ta = {.v = t}, va = {.v = V}, wa = {.v = W}, ra = {.v = rcp};
+    TraceLanes4i oka = {.v = ok}, pa = {.v = b->prim};
+    int best = -1;
+    float tb = *tmax;
+    for (int j = 0; j < 4; ++j) {
+        if (oka.a[j] && ta.a[j] < tb) {
+            tb = ta.a[j];
+            best = j;
+        }
+    }
+    *tmax = tb;
+    hit->t = tb;
+    hit->u = va.a[best] * ra.a[best];
+    hit->v = wa.a[best] * ra.a[best];
+    hit->prim = pa.a[best];
+    hit->inst = inst;
+    return true;
+}
+
+/* Index of the lowest set bit of x != 0 (OpenCL 1.2 has clz but not ctz). */
+TRACE_INLINE int trace_lowest_bit(int x) {
+#if TRACE_CPU && defined(__clang__)
+    return __builtin_ctz((uint)x);
+#else
+    return 31 - clz(x & -x);
+#endif
+}
+
+/* The movemask of a comparison result (lanes -1 or 0). */
+TRACE_INLINE int trace_mask8(int8 m) {
+    m &= (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    int4 h = m.lo | m.hi;
+    int2 q = h.lo | h.hi;
+    return q.x | q.y;
+}
+
+/* One mesh's wide BVH from `root`: all eight child boxes per node with float8 slabs, the leaves
+   hit tested at once (closest first is not needed: they shrink *tmax), the inner children hit
+   pushed far to near with their entry distance, popped nearest first and dropped when a closer
+   hit has been found since. Same contract as trace_blas. */
+TRACE_INLINE bool trace_blas(__global const WideNode* restrict nodes,
+                             __global const TriBlock* restrict blocks, int root, const TraceRay* r,
+                             float tmin, float* tmax, Hit* hit, int inst, bool any,
+                             __global int* restrict trace_stats) {
+    /* the near and far plane of each axis for this ray's direction signs */
+    int nx = r->idir.x >= 0.0f ? 0 : 3, ny = r->idir.y >= 0.0f ? 1 : 4,
+        nz = r->idir.z >= 0.0f ? 2 : 5;
+    int fx = 3 - nx, fy = 5 - ny, fz = 7 - nz;
+    float8 ox = (float8)(r->org.x), oy = (float8)(r->org.y), oz = (float8)(r->org.z);
+    float8 ix = (float8)(r->idir.x), iy = (float8)(r->idir.y), iz = (float8)(r->idir.z);
+    int stack_node[TRACE_WIDE_STACK];
+    float stack_t[TRACE_WIDE_STACK];
+    int sp = 0, node = root;
+    bool found = false;
+    for (;;) {
+        __global const WideNode* n = nodes + node;
+        float8 tnx = (n->plane[nx] - ox) * ix, tny = (n->plane[ny] - oy) * iy,
+               tnz = (n->plane[nz] - oz) * iz;
+        float8 tfx = (n->plane[fx] - ox) * ix, tfy = (n->plane[fy] - oy) * iy,
+               tfz = (n->plane[fz] - oz) * iz;
+        float8 tn = TRACE_MAX(TRACE_MAX(tnx, tny), TRACE_MAX(tnz, (float8)(tmin)));
+        float8 tf = TRACE_MIN(TRACE_MIN(tfx, tfy), tfz) * TRACE_BOX_GROW;
+        tf = TRACE_MIN(tf, (float8)(*tmax));
+        int8 cnt = n->cnt;
+        int bits = trace_mask8(tn <= tf); /* empty slots: tn = +inf > tf = -inf */
+        if (bits) {
+            int leaves = bits & trace_mask8(cnt > 0), inner = bits ^ leaves;
+            TraceLanes8i ref = {.v = n->ref};
+#if TRACE_CPU && TRACE_WIDE_PREFETCH
+            /* start reading the inner children hit (the next nodes) before the leaf tests:
+               +14-20% incoherent rays on PoCL; their leaf blocks are needed at once, no gain */
+            for (int pf = inner; pf; pf &= pf - 1) {
+                __global const char* p =
+                    (__global const char*)(nodes + ref.a[trace_lowest_bit(pf)]);
+                TRACE_PREFETCH(p);
+                TRACE_PREFETCH(p + 64);
+                TRACE_PREFETCH(p + 128);
+                TRACE_PREFETCH(p + 192);
+            }
+#endif
+            if (leaves) {
+                TraceLanes8i c = {.v = cnt};
+                do {
+                    int k = trace_lowest_bit(leaves);
+                    leaves &= leaves - 1;
+                    int last = ref.a[k] + (c.a[k] + WIDE_BLOCK - 1) / WIDE_BLOCK;
+                    for (int bk = ref.a[k]; bk < last; ++bk) {
+                        if (trace_block(blocks + bk, r, tmin, tmax, hit, inst)) {
+                            found = true;
+                            if (any) return true;
+                        }
+                    }
+                } while (leaves);
+            }
+            if (inner) {
+                TraceLanes8 te = {.v = tn};
+                int k = trace_lowest_bit(inner);
+                inner &= inner - 1;
+                if (!inner) { /* one inner child: go straight on */
+                    if (te.a[k] < *tmax) {
+                        node = ref.a[k];
+                        continue;
+                    }
+                } else { /* insertion-sort the children into the stack, nearest on top */
+                    int base = sp;
+                    for (;;) {
+                        float tk = te.a[k];
+                        if (tk < *tmax) {
+                            if (sp < TRACE_WIDE_STACK) {
+                                int q = sp++;
+                                while (q > base && stack_t[q - 1] < tk) {
+                                    stack_t[q] = stack_t[q - 1];
+                                    stack_node[q] = stack_node[q - 1];
+                                    --q;
+                                }
+                                stack_t[q] = tk;
+                                stack_node[q] = ref.a[k];
+                            } else {
+                                atomic_inc(trace_stats + TRACE_STAT_OVERFLOW);
+                            }
+                        }
+                        if (!inner) break;
+                        k = trace_lowest_bit(inner);
+                        inner &= inner - 1;
+                    }
+                }
+            }
+        }
+        for (;;) { /* pop the nearest child still in front of the closest hit */
+            if (sp == 0) return found;
+            --sp;
+            if (stack_t[sp] < *tmax) {
+                node = stack_node[sp];
+                break;
+            }
+        }
+    }
+}
+#else
 /* One mesh's BVH from `root`. Shrinks *tmax to each closer hit and records it in *hit. */
-inline bool trace_blas(__global const BvhNode* restrict nodes,
-                       __global const BvhTri* restrict tris, int root, const TraceRay* r,
-                       float tmin, float* tmax, Hit* hit, int inst, bool any,
-                       __global int* restrict trace_stats) {
+TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
+                             __global const BvhTri* restrict tris, int root, const TraceRay* r,
+                             float tmin, float* tmax, Hit* hit, int inst, bool any,
+                             __global int* restrict trace_stats) {
     int stack[TRACE_STACK];
     int sp = 0, node = root;
     bool found = false;
@@ -207,10 +432,11 @@ inline bool trace_blas(__global const BvhNode* restrict nodes,
     }
     return found;
 }
+#endif
 
 /* The whole scene: the TLAS over instances, each instance's BLAS in its object space. */
-inline bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax, bool any,
-                        Hit* hit) {
+TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
+                              bool any, Hit* hit) {
     hit->t = INFINITY;
     hit->u = 0.0f;
     hit->v = 0.0f;
@@ -261,21 +487,21 @@ inline bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float 
 }
 
 /* Closest hit in [tmin, tmax): prim/inst -1 and t INFINITY on a miss. */
-inline Hit scene_closest_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
+TRACE_INLINE Hit scene_closest_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
     Hit h;
     trace_scene(SCENE_ARGS, org, dir, tmin, tmax, false, &h);
     return h;
 }
 
 /* Is anything hit in [tmin, tmax)? (shadow rays) */
-inline bool scene_any_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
+TRACE_INLINE bool scene_any_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
     Hit h;
     return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, &h);
 }
 
 /* Any hit, and which one was found first (not necessarily the closest). */
-inline bool scene_any_hit_record(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
-                                 Hit* h) {
+TRACE_INLINE bool scene_any_hit_record(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
+                                       Hit* h) {
     return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, h);
 }
 

@@ -19,6 +19,7 @@ import numpy as np
 import pyopencl as cl
 
 from kernels.runtime import Runtime
+from raytrace.bvh_wide import WideBvh, WideStorage
 from raytrace.sort import Launch, SortMethod, make_sorter
 
 _F4 = (np.float32, 4)
@@ -98,13 +99,16 @@ class Blas:
     The object keeps references to both; they must stay alive and keep their sizes.
     ``leaf_size``: most triangles per leaf (1..15). ``key_bits``: Morton bits sorted (<= 32).
     ``storage``: where to write (a Scene's shared arrays); own buffers when None.
+    ``wide``: also keep the wide layout of the tree there (``raytrace.bvh_wide``, the CPU's):
+    made after every build and refreshed after every refit, as part of them.
     Nothing is built until :meth:`rebuild` is called.
     """
 
     def __init__(self, rt: Runtime, vertices_buf: cl.Buffer, triangles_buf: cl.Buffer,
                  n_vertices: int, n_triangles: int, *, leaf_size: int = DEFAULT_LEAF_SIZE,
                  key_bits: int = DEFAULT_KEY_BITS, sort: SortMethod | str = SortMethod.AUTO,
-                 storage: BlasStorage | None = None, stage: str = "bvh"):
+                 storage: BlasStorage | None = None, wide: WideStorage | None = None,
+                 stage: str = "bvh"):
         n_vertices, n_triangles = int(n_vertices), int(n_triangles)
         if n_triangles < 1:
             raise ValueError(f"Blas: n_triangles must be >= 1, got {n_triangles}")
@@ -142,6 +146,8 @@ class Blas:
         self._sorter = make_sorter(rt, self.keys, self.order, n, key_bits=self.key_bits,
                                    method=sort, stage=f"{stage}.sort")
         self._bind_kernels()
+        self.wide = None if wide is None else WideBvh(
+            rt, self, wide, expected_depth_bound(n, self.key_bits), stage=stage)
         self.built = False
 
     def _bind_kernels(self) -> None:
@@ -186,6 +192,8 @@ class Blas:
         self.rt.queue.flush()  # let the device start while the sort is being enqueued
         self._sorter.enqueue()
         self._hier()  # gather + bottom-up boxes in one launch
+        if self.wide is not None:
+            self.wide.collapse()
         self.built = True
 
     def refit(self) -> None:
@@ -200,6 +208,8 @@ class Blas:
             return
         self._reset_refit()
         self._hier()  # gather + bottom-up boxes in one launch
+        if self.wide is not None:
+            self.wide.refit()
 
     # -- host inspection (synchronises; not for the frame loop) -------------------------------
     def info(self) -> np.void:
@@ -210,7 +220,10 @@ class Blas:
         return out[0]
 
     def check(self) -> None:
-        """Raise ValueError if the last build or refit saw non-finite vertex coordinates."""
+        """Raise ValueError if the last build or refit saw non-finite vertex coordinates (or the
+        wide tree was cut short)."""
+        if self.wide is not None:
+            self.wide.check()
         info = self.info()
         if info["n_bad"]:
             raise ValueError(f"BVH input has {int(info['n_bad'])} triangles with a NaN or "

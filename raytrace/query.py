@@ -49,6 +49,7 @@ class RayQuery:
         to time the GPU flavour of the traversal on a CPU; see kernels/traverse.h)."""
         self.rt, self.n, self.stage = scene.rt, int(n), stage
         name = "trace_any" if any_hit else "trace_closest"
+        defines = {**scene.trace_defines, **(defines or {})}
         self._k = cl.Kernel(scene.rt.program("trace_query.cl", defines), name)
         self._k.set_args(*scene.trace_args(), np.int32(n), org, dirs, hits)
         # kernel arguments hold no references: keep the buffers alive as long as the query

@@ -252,6 +252,9 @@ class Renderer:
     def _bind(self, levels: int) -> None:
         """Bind every kernel's arguments when the scene's buffers changed (a rebuild, new
         tables) or a deeper level is needed; per-frame scalars go through :meth:`_set`."""
+        if self.scene.scene.layout != self.rt.bvh_layout:
+            raise ValueError(f"the scene's BVH layout is {self.scene.scene.layout!r} but the "
+                             f"renderer's kernels were built for {self.rt.bvh_layout!r}")
         scene_args = tuple(self.scene.scene.trace_args())
         geom = tuple(self.scene.shade_args())
         bufs = scene_args + geom + (self.scene.light_buf,)

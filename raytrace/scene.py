@@ -28,6 +28,11 @@ from raytrace.bvh import (
     node_count,
     vertices_to_float4,
 )
+from raytrace.bvh_wide import (
+    DEFAULT_WIDE_LEAF_SIZE,
+    WideStorage,
+    check_layout,
+)
 from raytrace.sort import Launch, make_sorter
 
 TLAS_LEAF_SIZE = 1
@@ -71,7 +76,10 @@ def _affine_rows(m, what: str) -> np.ndarray:
 class Scene:
     """Meshes, instances and the two-level BVH over them, on one device.
 
-    ``leaf_size``: most triangles per BLAS leaf. Typical use::
+    ``layout``: how the BLASes are stored for traversal, ``"binary"`` (GPU) or ``"wide"`` (8-wide
+    nodes, CPU; ``raytrace.bvh_wide``); default: the runtime's ``bvh_layout``. Kernels that trace
+    must be built with :attr:`trace_defines` (the runtime adds its own layout to every build).
+    ``leaf_size``: most triangles per BLAS leaf (default 1 binary, 4 wide). Typical use::
 
         scene = Scene(rt)
         water = scene.add_mesh(vbuf, tbuf, dynamic=True, n_vertices=nv, n_triangles=nt)
@@ -84,7 +92,11 @@ class Scene:
         kernel.set_args(*scene.trace_args(), ...)
     """
 
-    def __init__(self, rt: Runtime, *, leaf_size: int = DEFAULT_LEAF_SIZE, stage: str = "bvh"):
+    def __init__(self, rt: Runtime, *, leaf_size: int | None = None, layout: str | None = None,
+                 stage: str = "bvh"):
+        self.layout = check_layout(rt.bvh_layout if layout is None else layout)
+        if leaf_size is None:
+            leaf_size = DEFAULT_WIDE_LEAF_SIZE if self.wide else DEFAULT_LEAF_SIZE
         self.rt, self.leaf_size, self.stage = rt, int(leaf_size), stage
         self.meshes: list[MeshRecord] = []
         self._inst_mesh: list[int] = []
@@ -148,6 +160,15 @@ class Scene:
         self._xforms_dirty = True
 
     @property
+    def wide(self) -> bool:
+        return self.layout == "wide"
+
+    @property
+    def trace_defines(self) -> dict:
+        """Build defines of a kernel that traces this scene (``kernels/scene.h``)."""
+        return {"TRACE_WIDE": int(self.wide)}
+
+    @property
     def n_instances(self) -> int:
         return len(self._inst_mesh)
 
@@ -196,6 +217,11 @@ class Scene:
         self.blas_infos = rt.buffer(INFO_DTYPE.itemsize * max(len(self.meshes), 1))
         self.mesh_prim_base = rt.to_device(
             np.array([m.prim_base for m in self.meshes] or [0], np.int32))
+        counts = [m.n_triangles for m in self.meshes]
+        wide = WideStorage.for_scene(rt, counts) if self.wide else [None] * len(counts)
+        # the instance records' BLAS roots: the binary root (in the header) or the wide root
+        roots = [w.node_base for w in wide] if self.wide else [-1] * len(counts)
+        self.mesh_wide_root = rt.to_device(np.array(roots or [0], np.int32))
         node_base = tri_base = 0
         for i, rec in enumerate(self.meshes):
             rec.node_base, rec.tri_base = node_base, tri_base
@@ -203,7 +229,7 @@ class Scene:
                                   self.blas_infos, i)
             rec.blas = Blas(rt, rec.vertices_buf, rec.triangles_buf, rec.n_vertices,
                             rec.n_triangles, leaf_size=self.leaf_size, storage=storage,
-                            stage=f"{self.stage}.blas")
+                            wide=wide[i], stage=f"{self.stage}.blas")
             node_base += node_count(rec.n_triangles)
             tri_base += rec.n_triangles
         self._storage_tris = n_tris
@@ -232,7 +258,8 @@ class Scene:
         prg = rt.program("bvh_tlas.cl")
         self._k_prep = cl.Kernel(prg, "tlas_prep")
         self._k_prep.set_args(np.int32(n), self._xforms_dev, self._inst_mesh_dev,
-                              self.mesh_prim_base, self.blas_infos, self.instances,
+                              self.mesh_prim_base, self.blas_infos, self.mesh_wide_root,
+                              np.int32(self.wide), self.instances,
                               self._tlas_boxes, self.tlas_info)
         self._k_morton = cl.Kernel(prg, "bvh_box_morton")
         self._k_morton.set_args(np.int32(n), self._tlas_boxes, self.tlas_info, np.int32(32),
@@ -273,8 +300,13 @@ class Scene:
     # -- kernels' view ----------------------------------------------------------------------
     def trace_args(self) -> list:
         """Buffers for ``SCENE_PARAMS`` (kernels/scene.h), in order; valid after update()."""
-        return [self.tlas_info, self.tlas_nodes, self.tlas_prims, self.instances,
-                self.blas_nodes, self.blas_tris, self.trace_stats]
+        if self.wide:
+            w = self.meshes[0].blas.wide.storage if self.meshes and self.meshes[0].blas else None
+            nodes, prims = (w.nodes, w.blocks) if w else (self.blas_nodes, self.blas_tris)
+        else:
+            nodes, prims = self.blas_nodes, self.blas_tris
+        return [self.tlas_info, self.tlas_nodes, self.tlas_prims, self.instances, nodes, prims,
+                self.trace_stats]
 
     def check(self) -> dict:
         """Read the device's guards (synchronises): raise ValueError on non-finite vertices or a

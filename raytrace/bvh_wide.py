@@ -1,0 +1,177 @@
+"""The wide BLAS layout for CPU devices: 8-wide nodes, 4-triangle blocks (kernels/bvh_wide.cl).
+
+A CPU OpenCL device (PoCL) runs one ray per work-item as scalar code, so a binary tree wastes its
+SIMD units: each node tests two boxes. The wide layout, made on the device from the binary LBVH
+after each build, tests eight child boxes with float8 slabs and four triangles with float4
+arithmetic (Embree's single-ray layout). The binary tree stays the builder's product: the collapse
+records where each child box comes from, so a refit is the binary refit plus one copy launch.
+
+Layouts are named ``"binary"`` (the GPU's, ``kernels/traverse.h`` with ``TRACE_WIDE=0``) and
+``"wide"`` (``TRACE_WIDE=1``); :func:`default_layout` picks by device type.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pyopencl as cl
+
+from kernels.runtime import Runtime
+from raytrace.sort import Launch
+
+LAYOUTS = ("binary", "wide")
+WIDTH = 8          #: children per wide node (WIDE_WIDTH in kernels/bvh.h)
+BLOCK = 4          #: triangles per block (WIDE_BLOCK)
+MAX_LEVELS = 64    #: wide tree levels the collapse launches at most (WIDE_MAX_LEVELS)
+#: Leaf size of the binary tree a wide tree is collapsed from, unless the caller sets one:
+#: leaves of up to one block (measured best on PoCL, BENCHMARKS.md).
+DEFAULT_WIDE_LEAF_SIZE = 4
+_WG = 64
+
+WIDE_NODE_DTYPE = np.dtype([("plane", np.float32, (6, WIDTH)), ("ref", np.int32, WIDTH),
+                            ("cnt", np.int32, WIDTH)])
+TRI_BLOCK_DTYPE = np.dtype([("v", np.float32, (3, 3, BLOCK)), ("prim", np.int32, BLOCK)])
+WIDE_INFO_DTYPE = np.dtype([("level_count", np.int32, MAX_LEVELS), ("n_nodes", np.int32),
+                            ("n_blocks", np.int32), ("truncated", np.int32), ("pad", np.int32)])
+
+
+def default_layout(rt: Runtime) -> str:
+    """``"binary"`` on a GPU, ``"wide"`` on a CPU device."""
+    return "binary" if rt.is_gpu else "wide"
+
+
+def check_layout(layout: str) -> str:
+    if layout not in LAYOUTS:
+        raise ValueError(f"BVH layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+    return layout
+
+
+def wide_node_bound(n_tris: int) -> int:
+    """Most wide nodes a tree over ``n_tris`` triangles can have.
+
+    Every node has at least two children, and one with fewer than eight holds only leaves (the
+    collapse opens inner children while it can). With L leaves, A such nodes (A <= L/2, plus the
+    root) and F full ones, 8F <= (F + A - 1) + L - 2A, so F + A <= (4L - 1)/7 + 1, and L <= n.
+    """
+    return (4 * max(int(n_tris), 1)) // 7 + 2
+
+
+def block_bound(n_tris: int) -> int:
+    """Most blocks: a leaf of c >= 1 triangles takes ceil(c / 4) <= c blocks."""
+    return max(int(n_tris), 1)
+
+
+@dataclasses.dataclass(frozen=True)
+class WideStorage:
+    """Where a BLAS's wide tree lives: a scene's shared arrays and this BLAS's offsets in them."""
+
+    nodes: cl.Buffer       #: WideNode array
+    node_base: int
+    blocks: cl.Buffer      #: TriBlock array
+    block_base: int
+    infos: cl.Buffer       #: WideInfo per BLAS (indexed like the binary BvhInfo)
+    info_index: int
+    bin: cl.Buffer         #: int per wide node: the binary node it was made from
+    src: cl.Buffer         #: 8 ints per wide node: each slot's binary node * 2 + side, or -1
+    block_src: cl.Buffer   #: int2 per block: first leaf-ordered triangle, count
+
+    @classmethod
+    def allocate(cls, rt: Runtime, n_tris: int) -> WideStorage:
+        """Own buffers for one BLAS of ``n_tris`` triangles (offsets 0)."""
+        return cls.for_scene(rt, [n_tris])[0]
+
+    @classmethod
+    def for_scene(cls, rt: Runtime, tri_counts: list[int]) -> list[WideStorage]:
+        """Shared buffers for several BLASes; one storage record per mesh, in order."""
+        nodes = [wide_node_bound(n) for n in tri_counts]
+        blocks = [block_bound(n) for n in tri_counts]
+        n_nodes, n_blocks = max(sum(nodes), 1), max(sum(blocks), 1)
+        bufs = dict(nodes=rt.buffer(WIDE_NODE_DTYPE.itemsize * n_nodes),
+                    blocks=rt.buffer(TRI_BLOCK_DTYPE.itemsize * n_blocks),
+                    infos=rt.buffer(WIDE_INFO_DTYPE.itemsize * max(len(tri_counts), 1)),
+                    bin=rt.buffer(4 * n_nodes), src=rt.buffer(4 * WIDTH * n_nodes),
+                    block_src=rt.buffer(8 * n_blocks))
+        out, nb, bb = [], 0, 0
+        for i, (nn, nbk) in enumerate(zip(nodes, blocks, strict=True)):
+            out.append(cls(node_base=nb, block_base=bb, info_index=i, **bufs))
+            nb += nn
+            bb += nbk
+        return out
+
+
+class WideBvh:
+    """The wide tree of one :class:`raytrace.bvh.Blas`, made and refreshed on the device.
+
+    ``collapse()`` after every binary build, ``refit()`` after every binary refit (the Blas calls
+    them). Its root is node ``storage.node_base`` (level 0 comes first).
+    """
+
+    def __init__(self, rt: Runtime, blas, storage: WideStorage, depth_bound: int,
+                 stage: str = "bvh"):
+        """``blas``: the binary :class:`raytrace.bvh.Blas`; ``depth_bound``: most levels of its
+        tree (:func:`raytrace.bvh.expected_depth_bound`), the number of collapse launches."""
+        if depth_bound > MAX_LEVELS:
+            raise ValueError(f"wide BVH: the binary tree may be {depth_bound} levels deep, more "
+                             f"than the {MAX_LEVELS} the wide tree holds")
+        self.rt, self.blas, self.storage = rt, blas, storage
+        prg = rt.program("bvh_wide.cl")
+        s, b = storage, blas.storage
+        self._levels = []
+        # level L has at most 8^L nodes: a grid-stride launch of up to `cap` work-items each
+        cap = max(4 * rt.device.max_compute_units * _WG, _WG)
+        for level in range(depth_bound):
+            k = cl.Kernel(prg, "bvh_wide_collapse")
+            k.set_args(np.int32(level), b.nodes, b.infos, np.int32(b.info_index), s.infos,
+                       np.int32(s.node_base), np.int32(s.block_base), s.bin, s.src, s.nodes,
+                       s.block_src)
+            size = 1 if level == 0 else min(WIDTH ** min(level, 10), cap)
+            self._levels.append(Launch(rt, f"{stage}.wide.collapse", k, size,
+                                       1 if level == 0 else _WG))
+        k = cl.Kernel(prg, "bvh_wide_refit")
+        k.set_args(b.nodes, b.tris, s.infos, np.int32(s.info_index), np.int32(s.node_base),
+                   np.int32(s.block_base), s.src, s.nodes, s.block_src, s.blocks)
+        n_work = max(wide_node_bound(blas.n_triangles), block_bound(blas.n_triangles))
+        self._refit = Launch(rt, f"{stage}.wide.refit", k, min(n_work, cap), _WG)
+        self._kernels = [lv.kernel for lv in self._levels] + [k]  # keep bound kernels alive
+
+    @property
+    def root(self) -> int:
+        return self.storage.node_base
+
+    def collapse(self) -> None:
+        """Make the wide tree from the binary one just built (enqueued; no host sync)."""
+        for launch in self._levels:
+            launch()
+        self._refit()
+
+    def refit(self) -> None:
+        """New boxes and triangles after a binary refit (enqueued; no host sync)."""
+        self._refit()
+
+    # -- host inspection (synchronises) -------------------------------------------------------
+    def info(self) -> np.void:
+        out = np.empty(1, WIDE_INFO_DTYPE)
+        cl.enqueue_copy(self.rt.queue, out, self.storage.infos,
+                        src_offset=self.storage.info_index * WIDE_INFO_DTYPE.itemsize)
+        return out[0]
+
+    def host_arrays(self) -> dict:
+        """The wide nodes and blocks in use (absolute refs), and the header."""
+        info = self.info()
+        s = self.storage
+        nodes = np.empty(int(info["n_nodes"]), WIDE_NODE_DTYPE)
+        blocks = np.empty(int(info["n_blocks"]), TRI_BLOCK_DTYPE)
+        q = self.rt.queue
+        if len(nodes):
+            cl.enqueue_copy(q, nodes, s.nodes, src_offset=s.node_base * WIDE_NODE_DTYPE.itemsize)
+        if len(blocks):
+            cl.enqueue_copy(q, blocks, s.blocks,
+                            src_offset=s.block_base * TRI_BLOCK_DTYPE.itemsize)
+        q.finish()
+        return {"nodes": nodes, "blocks": blocks, "info": info, "node_base": s.node_base,
+                "block_base": s.block_base}
+
+    def check(self) -> None:
+        if int(self.info()["truncated"]):
+            raise ValueError(f"wide BVH deeper than {MAX_LEVELS} levels: subtrees were dropped")
