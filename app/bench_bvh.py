@@ -2,9 +2,9 @@
 exact workload of NVIDIA Warp's anchor script (``../shared/bench/warp_anchor.py``: height-field
 grids of n x n vertices, a 1920x1080 camera, 2^21 incoherent downward rays), build times of the
 seed's meshes, the device radix sort against ``pyopencl.algorithm.RadixSort``, and (where embreex is
-installed) Embree's single-thread ray rate on the same rays. On a CPU device it also times the GPU
-flavour of the traversal (``-DTRACE_CPU=0``, kernels/traverse.h) on the same rays and reports rays
-per second of process CPU time (the host may be shared) beside the wall-clock rates.
+installed) Embree's single-thread ray rate on the same rays. On a CPU device it also times the other
+BVH layout (binary beside wide, ``raytrace.bvh_wide``) on the same rays and reports rays per second
+of process CPU time (the host may be shared) beside the wall-clock rates.
 
 Times are medians over ``--reps`` after one warm-up: ``*_ms`` wall clock from the first enqueue to
 the end of ``queue.finish()`` (as Warp's script measures), ``*_gpu_ms`` the sum of the OpenCL
@@ -155,8 +155,9 @@ def timed(rt, fn, reps: int) -> tuple[float, float, dict]:
     return float(np.median(walls)), float(np.median(gpus)), per_stage
 
 
-def embree_rate(vertices, triangles, o, d) -> dict | None:
-    """Embree (embreex, robust mode) single-thread closest-hit rate on the same rays, or None."""
+def embree_rate(vertices, triangles, o, d, reps: int = 3) -> dict | None:
+    """Embree (embreex, robust mode) single-thread closest-hit rate on the same rays, or None:
+    the median of ``reps`` runs after a warm-up, as for ours."""
     try:
         from embreex import mesh_construction, rtcore_scene
     except ImportError:
@@ -166,14 +167,14 @@ def embree_rate(vertices, triangles, o, d) -> dict | None:
                                    triangles.astype(np.int32))
     o32, d32 = np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
     scene.run(o32[:1000], d32[:1000], query="INTERSECT", output=1)  # warm-up (build)
-    best = best_cpu = np.inf
-    for _ in range(2):
+    walls, cpus = [], []
+    for _ in range(max(reps, 1)):
         t0, c0 = time.perf_counter(), time.process_time()
         res = scene.run(o32, d32, query="INTERSECT", output=1)
-        best = min(best, time.perf_counter() - t0)
-        best_cpu = min(best_cpu, time.process_time() - c0)
-    return {"Mrays_s": len(o) / best / 1e6, "Mrays_per_cpu_s": len(o) / best_cpu / 1e6,
-            "prim": np.asarray(res["primID"])}
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    return {"Mrays_s": len(o) / np.median(walls) / 1e6,
+            "Mrays_per_cpu_s": len(o) / np.median(cpus) / 1e6, "prim": np.asarray(res["primID"])}
 
 
 # -- the benchmark ------------------------------------------------------------------------------
@@ -185,11 +186,12 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
 
     vertices, triangles = height_field_grid(n)
     row = {"grid": n - 1, "vertices_per_side": n, "tris": len(triangles)}
-    scene = Scene(rt, leaf_size=args.leaf_size, stage="bench.bvh")
+    scene = Scene(rt, leaf_size=args.leaf_size, layout=args.layout, stage="bench.bvh")
     mesh = scene.add_mesh(vertices, triangles, dynamic=True)
     scene.add_instance(mesh)
     scene.update()
     blas = scene.blas(mesh)
+    row["layout"], row["leaf_size"] = scene.layout, scene.leaf_size
     row["build_ms"], row["build_gpu_ms"], st = timed(rt, blas.rebuild, args.reps)
     row.update({f"build.{k.split('.', 2)[-1]}_ms": v for k, v in st.items()})
     row["refit_ms"], row["refit_gpu_ms"], _ = timed(rt, blas.refit, args.reps)
@@ -197,9 +199,19 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
     blas.rebuild()
     stats = blas.stats()
     row.update({f"tree_{k}": v for k, v in stats.items() if k != "n_triangles"})
-    log(f"grid {n - 1}^2 ({len(triangles)} tris): build {row['build_ms']:.3f} ms "
-        f"(gpu {row['build_gpu_ms']:.3f}), refit {row['refit_ms']:.3f} ms, "
-        f"tlas {row['tlas_ms']:.3f} ms, depth {stats['depth']}, SAH {stats['sah_cost']:.1f}")
+    if blas.wide is not None:
+        row["wide_nodes"] = int(blas.wide.info()["n_nodes"])
+        row["wide_blocks"] = int(blas.wide.info()["n_blocks"])
+    log(f"grid {n - 1}^2 ({len(triangles)} tris, {scene.layout} layout, leaf {scene.leaf_size}):"
+        f" build {row['build_ms']:.3f} ms (gpu {row['build_gpu_ms']:.3f}), refit "
+        f"{row['refit_ms']:.3f} ms, tlas {row['tlas_ms']:.3f} ms, depth {stats['depth']}, "
+        f"SAH {stats['sah_cost']:.1f}")
+    other = None
+    if args.compare_layouts and not rt.is_gpu:
+        # the other layout on the same rays (its own default leaf size)
+        other = Scene(rt, layout="binary" if scene.wide else "wide", stage="bench.bvh_other")
+        other.add_instance(other.add_mesh(vertices, triangles, dynamic=True))
+        other.update()
     warp = WARP_H100.get(n)
     if warp:
         row["build_vs_warp"] = warp["build_ms"] / row["build_ms"]
@@ -221,17 +233,17 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
             # the host is shared: rays per second of CPU time this process used (PoCL's
             # threads included) is less sensitive to other processes than the wall clock
             row[f"{kind}_Mrays_per_cpu_s"] = len(o) / cpu_s / 1e6
-        if args.compare_generic and not rt.is_gpu:
-            # the same kernel with the GPU flavour of traverse.h (TRACE_CPU=0), same rays
-            qg = RayQuery(scene, q.org, q.dirs, rt.buffer(HIT_DTYPE.itemsize * len(o)),
-                          len(o), stage="bench.trace_generic", defines={"TRACE_CPU": 0})
+        if other is not None:
+            qg = RayQuery(other, q.org, q.dirs, rt.buffer(HIT_DTYPE.itemsize * len(o)),
+                          len(o), stage="bench.trace_other")
             c0 = time.process_time()
             gwall, _, _ = timed(rt, lambda qg=qg: qg.enqueue(args.local_size), args.reps)
             g_cpu_s = (time.process_time() - c0) / (args.reps + 1)
             ghits = rt.to_host(qg.hits, HIT_DTYPE, len(o))
-            row[f"{kind}_generic_Mrays_s"] = len(o) / gwall / 1e3
-            row[f"{kind}_generic_Mrays_per_cpu_s"] = len(o) / g_cpu_s / 1e6
-            row[f"{kind}_generic_same_hits"] = float(np.mean(ghits["prim"] == hits["prim"]))
+            row["other_layout"] = other.layout
+            row[f"{kind}_other_Mrays_s"] = len(o) / gwall / 1e3
+            row[f"{kind}_other_Mrays_per_cpu_s"] = len(o) / g_cpu_s / 1e6
+            row[f"{kind}_other_same_hits"] = float(np.mean(ghits["prim"] == hits["prim"]))
             del qg
         row[f"{kind}_hit_frac"] = float((hits["prim"] >= 0).mean())
         chk = check_grid_hits(n, vertices, triangles, o, d, hits, 1e6, args.check_rays)
@@ -247,7 +259,7 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
                f"{row[f'{kind}_gpu_Mrays_s']:.1f}), hits {row[f'{kind}_hit_frac']:.4f}, "
                f"check {row[f'{kind}_check']} ({chk['checked']} rays)")
         if args.embree and len(triangles) <= args.embree_max_tris:
-            emb = embree_rate(vertices, triangles, o, d)
+            emb = embree_rate(vertices, triangles, o, d, args.reps)
             if emb is not None:
                 row[f"{kind}_embree_1t_Mrays_s"] = emb["Mrays_s"]
                 row[f"{kind}_embree_1t_Mrays_per_cpu_s"] = emb["Mrays_per_cpu_s"]
@@ -255,13 +267,13 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
                 row[f"{kind}_embree_prim_agreement"] = float(np.mean(emb["prim"] ==
                                                                      hits["prim"]))
                 msg += f"; embree 1 thread {emb['Mrays_s']:.1f} Mrays/s"
-        if f"{kind}_generic_Mrays_s" in row:
-            msg += (f"; TRACE_CPU=0 {row[f'{kind}_generic_Mrays_s']:.2f} Mrays/s (same hits "
-                    f"{row[f'{kind}_generic_same_hits']:.6f})")
+        if f"{kind}_other_Mrays_s" in row:
+            msg += (f"; {other.layout} layout {row[f'{kind}_other_Mrays_s']:.2f} Mrays/s (same "
+                    f"hits {row[f'{kind}_other_same_hits']:.6f})")
         if f"{kind}_Mrays_per_cpu_s" in row:
             msg += f"; per CPU-second: ours {row[f'{kind}_Mrays_per_cpu_s']:.2f}"
-            if f"{kind}_generic_Mrays_per_cpu_s" in row:
-                msg += f", TRACE_CPU=0 {row[f'{kind}_generic_Mrays_per_cpu_s']:.2f}"
+            if f"{kind}_other_Mrays_per_cpu_s" in row:
+                msg += f", {other.layout} {row[f'{kind}_other_Mrays_per_cpu_s']:.2f}"
             if f"{kind}_embree_1t_Mrays_per_cpu_s" in row:
                 msg += f", embree {row[f'{kind}_embree_1t_Mrays_per_cpu_s']:.2f}"
         log(msg)
@@ -334,7 +346,7 @@ def bench_sweep(rt, n: int, args, rays: dict, log) -> list[dict]:
     packed = {k: pack_rays(o, d, 0.0, 1e6) for k, (o, d) in rays.items()}
     rows = []
     for leaf in [int(x) for x in args.sweep_leaf.split(",")]:
-        scene = Scene(rt, leaf_size=leaf, stage="sweep.bvh")
+        scene = Scene(rt, leaf_size=leaf, layout=args.layout, stage="sweep.bvh")
         scene.add_instance(scene.add_mesh(vertices, triangles, dynamic=True))
         scene.update()
         build, _, _ = timed(rt, scene.blas(0).rebuild, 3)
@@ -357,13 +369,14 @@ def bench_sweep(rt, n: int, args, rays: dict, log) -> list[dict]:
 
 def bench_mesh(rt, name: str, args, log) -> dict:
     from app.meshes import load_mesh
-    from raytrace import Blas
-    from raytrace.bvh import vertices_to_float4
+    from raytrace import Scene
 
     v, t = load_mesh(name)
-    blas = Blas(rt, rt.to_device(vertices_to_float4(v)), rt.to_device(t), len(v), len(t),
-                leaf_size=args.leaf_size, stage="bench.mesh")
-    row = {"mesh": name, "tris": len(t)}
+    scene = Scene(rt, leaf_size=args.leaf_size, layout=args.layout, stage="bench.mesh")
+    scene.add_instance(scene.add_mesh(v, t))
+    scene.update()
+    blas = scene.blas(0)
+    row = {"mesh": name, "tris": len(t), "layout": scene.layout, "leaf_size": scene.leaf_size}
     row["build_ms"], row["build_gpu_ms"], _ = timed(rt, blas.rebuild, args.reps)
     row["refit_ms"], row["refit_gpu_ms"], _ = timed(rt, blas.refit, args.reps)
     blas.rebuild()
@@ -382,10 +395,10 @@ def add_arguments(p) -> None:
     p.add_argument("--meshes", default=",".join(MESHES),
                    help="meshes in scenes/models to time builds of ('' for none)")
     p.add_argument("--reps", type=int, default=10, help="timed repetitions (median)")
-    from raytrace.bvh import DEFAULT_LEAF_SIZE
-
-    p.add_argument("--leaf-size", type=int, default=DEFAULT_LEAF_SIZE,
-                   help="most triangles per BVH leaf (default: %(default)s)")
+    p.add_argument("--layout", choices=["binary", "wide"], default=None,
+                   help="BLAS layout (default: binary on a GPU, wide on a CPU)")
+    p.add_argument("--leaf-size", type=int, default=None,
+                   help="most triangles per BVH leaf (default: 1 binary, 4 wide)")
     p.add_argument("--local-size", type=int, default=64, help="work-group size of the trace kernel")
     p.add_argument("--check-rays", type=int, default=1000,
                    help="rays per set checked against the float64 reference")
@@ -403,9 +416,8 @@ def add_arguments(p) -> None:
                    help="grid vertices per side of the sweep (default: %(default)s)")
     p.add_argument("--sweep-wg", default="32,64,128,256",
                    help="trace work-group sizes for --sweep-leaf (default: %(default)s)")
-    p.add_argument("--no-compare-generic", dest="compare_generic", action="store_false",
-                   help="on a CPU device, skip timing the GPU flavour of the traversal "
-                        "(TRACE_CPU=0) beside the CPU one")
+    p.add_argument("--no-compare-layouts", dest="compare_layouts", action="store_false",
+                   help="on a CPU device, skip timing the other BVH layout on the same rays")
     p.add_argument("--reference-sah", action="store_true",
                    help="also build a CPU binned-SAH tree of each mesh for its SAH cost (slow)")
 
@@ -431,7 +443,7 @@ def run(args) -> int:
 
     meta = {"device": rt.name, "platform": rt.device.platform.name.strip(),
             "date": datetime.date.today().isoformat(), "command": " ".join(sys.argv),
-            "python": platform.python_version(), "leaf_size": args.leaf_size,
+            "python": platform.python_version(), "leaf_size": args.leaf_size, "layout": args.layout,
             "reps": args.reps, "rays": args.rays}
     log(f"bench bvh on {rt.name} ({meta['platform']})")
     if args.rays == "full":

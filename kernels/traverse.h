@@ -3,7 +3,8 @@
    World-space rays; the direction need not be unit length and t is in units of it.
    Triangle test: watertight (Woop, Benthin & Wald 2013), two-sided, with a float64 re-evaluation
    of edge functions that come out exactly zero. Box test: slabs with the far distance enlarged by
-   2 gamma(3) (pbrt), so rounding never culls a box the triangle test would hit.
+   2 gamma(3) (pbrt), so rounding never culls a box the triangle test would hit, and NaN-safe for
+   rays parallel to an axis that run in a box's face (trace_box).
    Traversal: both child boxes per node, leaves tested when met, near child first, one stack per
    level of TRACE_STACK entries. The builder's trees are at most 64 levels deep (bvh_delta), so the
    stack cannot overflow; the guard still counts an overflow in trace_stats instead of writing
@@ -81,15 +82,10 @@ TRACE_INLINE float trace_axis(float3 v, int k) {
     return k == 0 ? v.x : (k == 1 ? v.y : v.z);
 }
 
-TRACE_INLINE float trace_safe_rcp(float d) {
-    /* a zero component becomes a huge finite reciprocal: no 0 * inf = NaN in the slab test */
-    return 1.0f / (fabs(d) > 1e-30f ? d : copysign(1e-30f, d));
-}
-
 TRACE_INLINE TraceRay trace_ray_setup(float3 org, float3 dir) {
     TraceRay r;
     r.org = org;
-    r.idir = (float3)(trace_safe_rcp(dir.x), trace_safe_rcp(dir.y), trace_safe_rcp(dir.z));
+    r.idir = 1.0f / dir; /* a zero component gives +-inf: see trace_box */
     float3 ad = fabs(dir);
     int kz = (ad.x >= ad.y && ad.x >= ad.z) ? 0 : (ad.y >= ad.z ? 1 : 2);
     int kx = kz == 2 ? 0 : kz + 1;
@@ -109,13 +105,18 @@ TRACE_INLINE TraceRay trace_ray_setup(float3 org, float3 dir) {
     return r;
 }
 
-/* Entry distance of the ray into [lo, hi] within [tmin, tmax], or INFINITY when it misses. */
+/* Entry distance of the ray into [lo, hi] within [tmin, tmax], or INFINITY when it misses.
+   Near and far planes are picked by the direction's signs. A zero direction component has an
+   infinite reciprocal: a plane on either side gives -inf/+inf, the right slab of a parallel ray,
+   and a plane through the origin gives 0 x inf = NaN, which the min/max chains drop (the NaN is
+   always the left operand of TRACE_MIN/MAX, whose right operand is never NaN; fmin/fmax drop it
+   on either side), so a ray running exactly in a face of the box still enters it. */
 TRACE_INLINE float trace_box(float3 lo, float3 hi, const TraceRay* r, float tmin, float tmax) {
-    float3 t0 = (lo - r->org) * r->idir, t1 = (hi - r->org) * r->idir;
-    float3 tn = TRACE_MIN(t0, t1), tf = TRACE_MAX(t0, t1);
-    float tnear = TRACE_MAX(TRACE_MAX(tn.x, tn.y), TRACE_MAX(tn.z, tmin));
-    float tfar = TRACE_MIN(TRACE_MIN(tf.x, tf.y), tf.z) * TRACE_BOX_GROW;
-    tfar = TRACE_MIN(tfar, tmax);
+    int3 neg = r->idir < 0.0f;
+    float3 tn = ((neg ? hi : lo) - r->org) * r->idir;
+    float3 tf = ((neg ? lo : hi) - r->org) * r->idir * TRACE_BOX_GROW;
+    float tnear = TRACE_MAX(tn.x, TRACE_MAX(tn.y, TRACE_MAX(tn.z, tmin)));
+    float tfar = TRACE_MIN(tf.x, TRACE_MIN(tf.y, TRACE_MIN(tf.z, tmax)));
     return tnear <= tfar ? tnear : INFINITY;
 }
 
@@ -307,9 +308,11 @@ TRACE_INLINE bool trace_blas(__global const WideNode* restrict nodes,
                tnz = (n->plane[nz] - oz) * iz;
         float8 tfx = (n->plane[fx] - ox) * ix, tfy = (n->plane[fy] - oy) * iy,
                tfz = (n->plane[fz] - oz) * iz;
-        float8 tn = TRACE_MAX(TRACE_MAX(tnx, tny), TRACE_MAX(tnz, (float8)(tmin)));
-        float8 tf = TRACE_MIN(TRACE_MIN(tfx, tfy), tfz) * TRACE_BOX_GROW;
-        tf = TRACE_MIN(tf, (float8)(*tmax));
+        /* NaN-safe chains as in trace_box */
+        float8 tn = TRACE_MAX(tnx, TRACE_MAX(tny, TRACE_MAX(tnz, (float8)(tmin))));
+        float8 tf = TRACE_MIN(tfx * TRACE_BOX_GROW,
+                              TRACE_MIN(tfy * TRACE_BOX_GROW,
+                                        TRACE_MIN(tfz * TRACE_BOX_GROW, (float8)(*tmax))));
         int8 cnt = n->cnt;
         int bits = trace_mask8(tn <= tf); /* empty slots: tn = +inf > tf = -inf */
         if (bits) {

@@ -333,9 +333,8 @@ def grid_rays(rng, xs, n=500):
 def test_wide_hits_equal_binary_and_reference(rt, wide_leaf):
     v, t = height_field_grid(33)
     rng = np.random.default_rng(21)
-    # grid lines inside the mesh only: rays in its bounding box's faces meet a known bug
-    # (test_rays_in_the_bounding_box_faces_hit below)
-    o, d, tmin, tmax, on_edges = grid_rays(rng, np.unique(v[:, 0])[1:-1])
+    # every grid line, the outer ones (in the faces of the mesh's box) included
+    o, d, tmin, tmax, on_edges = grid_rays(rng, np.unique(v[:, 0]))
     wide = make_scene(rt, "wide", [(v, t)], leaf_size=wide_leaf)
     binary = make_scene(rt, "binary", [(v, t)])
     assert wide.trace_defines == {"TRACE_WIDE": 1} and binary.trace_defines == {"TRACE_WIDE": 0}
@@ -492,18 +491,17 @@ def test_small_meshes_and_leaf_sizes(rt, n, leaf_size):
     assert len(np.unique(got["prim"][got["prim"] >= 0])) == n
 
 
-@pytest.mark.xfail(strict=True, reason="BUG (reported with these tests): trace_box and the wide "
-                   "slab test cull a ray lying exactly in a box's upper face when its direction "
-                   "component there is +0 (lower face: -0), since 0 * the safe reciprocal 1e30 "
-                   "ends the slab at t = 0; triangles on the mesh's bounding box are missed")
 @pytest.mark.parametrize("layout", ["wide", "binary"])
 def test_rays_in_the_bounding_box_faces_hit(rt, layout):
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
     t = np.array([[0, 1, 2]])
     # straight down onto each corner and edge midpoint of the triangle
     xy = np.array([[0, 0], [1, 0], [0, 1], [0.5, 0], [0, 0.5], [0.5, 0.5]])
-    o = np.c_[xy, np.ones(len(xy))]
-    d = np.tile([0.0, 0.0, -1.0], (len(xy), 1))
+    # +0 and -0 direction components: the ray lies in an upper or a lower face of the boxes
+    # (0 x inf = NaN in the slab test, which must not cull the box)
+    o = np.tile(np.c_[xy, np.ones(len(xy))], (2, 1))
+    d = np.r_[np.tile([0.0, 0.0, -1.0], (len(xy), 1)), np.tile([-0.0, -0.0, -1.0], (len(xy), 1))]
+    xy = np.r_[xy, xy]
     assert np.all(intersect_reference(v, t, o, d)["prim"] == 0)
     got = trace(rt, make_scene(rt, layout, [(v, t)]), o, d)
     assert np.all(got["prim"] == 0), f"missed: {xy[got['prim'] < 0].tolist()}"
