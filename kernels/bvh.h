@@ -27,13 +27,15 @@ typedef struct {
     float4 p2;
 } BvhTri;
 
-/* Per-BVH header written on the device by the build (80 bytes).
+/* Per-BVH header written on the device by the build (96 bytes).
    root   : absolute index of the root node, -1 while the BVH holds no primitive;
    n_prims: primitives in the BVH;
    n_bad  : primitives with a non-finite coordinate seen by the last build or refit;
    depth_guard: set to 1 if a bottom-up walk ever ran longer than BVH_MAX_WALK (never expected);
    lo, hi : the root box (xyz; w unused);
-   cmin, cmax: centroid bounds as order-preserving ints (build scratch, see float_to_ordered). */
+   cmin, cmax: centroid bounds as order-preserving ints (build scratch, see float_to_ordered);
+   n_bad_pending: the count of the launch under way; the work-item that completes the root moves
+   it to n_bad and zeroes it, so a refit needs no header reset launch. */
 typedef struct {
     int root;
     int n_prims;
@@ -43,6 +45,8 @@ typedef struct {
     float4 hi;
     int4 cmin;
     int4 cmax;
+    int n_bad_pending;
+    int pad[3];
 } BvhInfo;
 
 /* The wide layout for CPU devices (TRACE_WIDE, raytrace/bvh_wide.py): the binary tree collapsed

@@ -1,8 +1,8 @@
 /* LBVH over a triangle mesh on the device (raytrace.bvh.Blas). Launch order of a build:
      bvh_reset_info -> bvh_tri_bounds -> bvh_tri_morton -> sort (sort_*.cl) ->
      bvh_gather_hierarchy
-   A refit (same topology, moved vertices) is bvh_reset_info(keep bounds) -> bvh_gather_hierarchy
-   on the stored sorted keys and order.
+   A refit (same topology, moved vertices) is bvh_gather_hierarchy alone, on the stored sorted keys
+   and order (the header's counts are handed over at the root, see BvhInfo.n_bad_pending).
    Inputs: vertices as float4 (w ignored), triangles as 3 x uint32 (packed, 12 bytes). */
 #include "bvh_hierarchy.h"
 
@@ -20,19 +20,17 @@ inline bool finite3(float3 v) {
     return isfinite(v.x) && isfinite(v.y) && isfinite(v.z);
 }
 
-/* Start a build (keep_bounds = 0) or a refit (1): root unknown, bad-primitive count zero. */
-__kernel void bvh_reset_info(__global BvhInfo* infos, int info_index, int n_prims,
-                             int keep_bounds) {
+/* Start a build: root unknown, counts zero, empty centroid bounds. */
+__kernel void bvh_reset_info(__global BvhInfo* infos, int info_index, int n_prims) {
     if (get_global_id(0) != 0) return;
     __global BvhInfo* info = infos + info_index;
     info->n_prims = n_prims;
     info->n_bad = 0;
+    info->n_bad_pending = 0;
     info->depth_guard = 0;
-    if (!keep_bounds) {
-        info->root = -1;
-        info->cmin = (int4)(float_to_ordered(INFINITY));
-        info->cmax = (int4)(float_to_ordered(-INFINITY));
-    }
+    info->root = -1;
+    info->cmin = (int4)(float_to_ordered(INFINITY));
+    info->cmax = (int4)(float_to_ordered(-INFINITY));
 }
 
 /* Centroid bounds of all triangles (grid-stride loop, then one reduction per work-group). */
@@ -84,7 +82,7 @@ inline void gather_triangle(__global const float4* restrict verts,
     bt.p1 = (float4)(b.xyz, 0.0f);
     bt.p2 = (float4)(c.xyz, 0.0f);
     out[tri_base + i] = bt;
-    if (!(finite3(a.xyz) && finite3(b.xyz) && finite3(c.xyz))) atomic_inc(&info->n_bad);
+    if (!(finite3(a.xyz) && finite3(b.xyz) && finite3(c.xyz))) atomic_inc(&info->n_bad_pending);
     *lo = fmin(fmin(a.xyz, b.xyz), c.xyz);
     *hi = fmax(fmax(a.xyz, b.xyz), c.xyz);
 }

@@ -169,6 +169,8 @@ inline void bvh_walk(int i, int n, int leaf_size, int node_base, int prim_base,
         else l = other;
         cur = parent;
         if (l == 0 && r == n - 1) {
+            /* every leaf's gather came before its walk, and all walks reached the root */
+            info->n_bad = atomic_xchg(&info->n_bad_pending, 0);
             info->root = node_base + cur;
             info->lo = (float4)(lo, 0.0f);
             info->hi = (float4)(hi, 0.0f);
@@ -185,6 +187,7 @@ inline void bvh_small_root(int n, int node_base, int prim_base, __global BvhNode
     p->hi_l = (float4)(hi, as_float(n));
     p->lo_r = (float4)(0.0f, 0.0f, 0.0f, as_float(0));
     p->hi_r = (float4)(0.0f, 0.0f, 0.0f, as_float(BVH_CHILD_EMPTY));
+    info->n_bad = atomic_xchg(&info->n_bad_pending, 0);
     info->root = node_base;
     info->lo = (float4)(lo, 0.0f);
     info->hi = (float4)(hi, 0.0f);

@@ -27,7 +27,8 @@ NODE_DTYPE = np.dtype([("lo_l", _F4), ("hi_l", _F4), ("lo_r", _F4), ("hi_r", _F4
 TRI_DTYPE = np.dtype([("p0", _F4), ("p1", _F4), ("p2", _F4)])
 INFO_DTYPE = np.dtype([("root", np.int32), ("n_prims", np.int32), ("n_bad", np.int32),
                        ("depth_guard", np.int32), ("lo", _F4), ("hi", _F4),
-                       ("cmin", (np.int32, 4)), ("cmax", (np.int32, 4))])
+                       ("cmin", (np.int32, 4)), ("cmax", (np.int32, 4)),
+                       ("n_bad_pending", np.int32), ("pad", np.int32, 3)])
 INSTANCE_DTYPE = np.dtype([("object_from_world", (np.float32, (3, 4))), ("blas_root", np.int32),
                            ("mesh", np.int32), ("prim_base", np.int32), ("pad", np.int32)])
 HIT_DTYPE = np.dtype([("t", np.float32), ("u", np.float32), ("v", np.float32),
@@ -162,8 +163,7 @@ class Blas:
             kern.set_args(*args)
             return kern
 
-        self._k_reset_build = k("bvh_reset_info", s.infos, idx, np.int32(n), np.int32(0))
-        self._k_reset_refit = k("bvh_reset_info", s.infos, idx, np.int32(n), np.int32(1))
+        self._k_reset_build = k("bvh_reset_info", s.infos, idx, np.int32(n))
         self._k_bounds = k("bvh_tri_bounds", v, t, n, nv, s.infos, idx)
         self._k_morton = k("bvh_tri_morton", v, t, n, nv, s.infos, idx, np.int32(self.key_bits),
                            self.keys, self.order)
@@ -173,7 +173,6 @@ class Blas:
         groups = min(-(-self.n_triangles // BOUNDS_WG), 4 * self.rt.device.max_compute_units * 8)
         rt, st, nt = self.rt, self.stage, self.n_triangles
         self._reset_build = Launch(rt, f"{st}.reset", self._k_reset_build, 1)
-        self._reset_refit = Launch(rt, f"{st}.reset", self._k_reset_refit, 1)
         self._bounds = Launch(rt, f"{st}.bounds", self._k_bounds, max(groups, 1) * BOUNDS_WG,
                               BOUNDS_WG)
         self._morton = Launch(rt, f"{st}.morton", self._k_morton, nt, 64)
@@ -206,8 +205,7 @@ class Blas:
         if not self.built:
             self.rebuild()
             return
-        self._reset_refit()
-        self._hier()  # gather + bottom-up boxes in one launch
+        self._hier()  # gather + bottom-up boxes in one launch (it also publishes n_bad)
         if self.wide is not None:
             self.wide.refit()
 

@@ -108,7 +108,7 @@ class Scene:
         cl.enqueue_fill_buffer(rt.queue, self.trace_stats, np.int32(0), 0, 4 * TRACE_STATS_LEN)
         self.tlas_info = rt.buffer(INFO_DTYPE.itemsize)
         self._k_reset = cl.Kernel(rt.program("bvh_build.cl"), "bvh_reset_info")
-        self._k_reset.set_args(self.tlas_info, np.int32(0), np.int32(0), np.int32(0))
+        self._k_reset.set_args(self.tlas_info, np.int32(0), np.int32(0))
         self._reset = Launch(rt, f"{stage}.tlas.reset", self._k_reset, 1)
         self._init_empty_tlas()
 

@@ -103,6 +103,33 @@ def test_nan_vertices_are_a_clear_error(rt):
     assert scene.check() == {"overflows": 0, "bad_triangles": 0}
 
 
+@pytest.mark.parametrize("n_tris, leaf_size", [(200, 1), (3, 4)])  # (3, 4): the one-leaf root
+def test_refit_counts_nan_triangles_afresh(rt, n_tris, leaf_size):
+    """A refit has no header reset: the launch's count is handed over at the root, so each refit
+    reports exactly its own non-finite triangles, never the sum over refits."""
+    rng = np.random.default_rng(5)
+    v = rng.random((3 * n_tris, 3)).astype(np.float32)
+    t = np.arange(3 * n_tris).reshape(n_tris, 3)
+    vbuf = rt.to_device(vertices_to_float4(v))
+    blas = Blas(rt, vbuf, rt.to_device(t.astype(np.uint32)), len(v), n_tris,
+                leaf_size=leaf_size)
+    blas.rebuild()
+    assert int(blas.info()["n_bad"]) == 0
+    bad = v.copy()
+    bad[[1, 4], 0] = np.nan                       # two triangles (vertices 1 and 4)
+    cl.enqueue_copy(rt.queue, vbuf, vertices_to_float4(bad))
+    for _ in range(3):
+        blas.refit()
+        assert int(blas.info()["n_bad"]) == (2 if n_tris > 1 else 1)
+        with pytest.raises(ValueError, match="NaN or infinite"):
+            blas.check()
+    cl.enqueue_copy(rt.queue, vbuf, vertices_to_float4(v))
+    blas.refit()
+    assert int(blas.info()["n_bad"]) == 0
+    blas.check()
+    assert int(blas.info()["n_bad_pending"]) == 0
+
+
 def test_clustered_input_depth_stays_bounded(rt):
     # coordinates spread over 30 octaves: Morton codes collide in long runs
     rng = np.random.default_rng(9)

@@ -10,7 +10,7 @@ from raytrace.bvh_wide import TRI_BLOCK_DTYPE, WIDE_INFO_DTYPE, WIDE_NODE_DTYPE
 @pytest.mark.parametrize("header, struct, dtype, size", [
     ("bvh.h", "BvhNode", NODE_DTYPE, 64),
     ("bvh.h", "BvhTri", TRI_DTYPE, 48),
-    ("bvh.h", "BvhInfo", INFO_DTYPE, 80),
+    ("bvh.h", "BvhInfo", INFO_DTYPE, 96),
     ("bvh.h", "Instance", INSTANCE_DTYPE, 64),
     ("scene.h", "Hit", HIT_DTYPE, 20),
     ("bvh.h", "WideNode", WIDE_NODE_DTYPE, 256),
