@@ -200,8 +200,8 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
     stats = blas.stats()
     row.update({f"tree_{k}": v for k, v in stats.items() if k != "n_triangles"})
     if blas.wide is not None:
-        row["wide_nodes"] = int(blas.wide.info()["n_nodes"])
-        row["wide_blocks"] = int(blas.wide.info()["n_blocks"])
+        winfo = blas.wide.info()
+        row["wide_nodes"], row["wide_blocks"] = int(winfo["n_nodes"]), int(winfo["n_blocks"])
     log(f"grid {n - 1}^2 ({len(triangles)} tris, {scene.layout} layout, leaf {scene.leaf_size}):"
         f" build {row['build_ms']:.3f} ms (gpu {row['build_gpu_ms']:.3f}), refit "
         f"{row['refit_ms']:.3f} ms, tlas {row['tlas_ms']:.3f} ms, depth {stats['depth']}, "

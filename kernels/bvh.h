@@ -71,7 +71,8 @@ typedef struct {
 } WideNode;
 
 /* 160 bytes: 4 triangles of one leaf, v[vertex][axis] across the 4 lanes; lanes past the leaf's
-   end repeat its first triangle (the same hit, never a false one). prim: input-order index. */
+   end repeat the block's first triangle (the same hit, never a false one). prim: input-order
+   index. */
 typedef struct {
     float4 v[3][3];
     int4 prim;

@@ -22,6 +22,18 @@ from kernels.timing import StageTimer
 KERNEL_DIR = Path(__file__).resolve().parent
 
 
+#: How scenes store their BLASes for traversal (kernels/scene.h, TRACE_WIDE): binary (GPUs) or
+#: wide (CPUs, raytrace.bvh_wide).
+BVH_LAYOUTS = ("binary", "wide")
+
+
+def check_bvh_layout(layout: str) -> str:
+    """``layout`` if it is one of :data:`BVH_LAYOUTS`, else a one-line ValueError."""
+    if layout not in BVH_LAYOUTS:
+        raise ValueError(f"BVH layout must be one of {', '.join(BVH_LAYOUTS)}, got {layout!r}")
+    return layout
+
+
 class KernelBuildError(RuntimeError):
     """A ``.cl`` program failed to compile; the message names the file and carries the log."""
 
@@ -61,9 +73,7 @@ class Runtime:
         self._hash = _source_hash()
         layout = bvh_layout or os.environ.get("LBWATER_BVH_LAYOUT") or (
             "binary" if self.is_gpu else "wide")
-        if layout not in ("binary", "wide"):
-            raise ValueError(f"BVH layout must be binary or wide, got {layout!r}")
-        self.bvh_layout = layout
+        self.bvh_layout = check_bvh_layout(layout)
 
     # -- facts ------------------------------------------------------------------------------
     @property

@@ -180,9 +180,7 @@ TRACE_INLINE bool trace_next(bool gl, bool gr, float tl, float tr, int rl, int r
 #define TRACE_WIDE_PREFETCH 1
 #endif
 /* Each wide level pushes at most WIDE_WIDTH - 1 children and pops one. */
-#ifndef TRACE_WIDE_STACK
 #define TRACE_WIDE_STACK ((WIDE_WIDTH - 1) * WIDE_MAX_LEVELS)
-#endif
 
 /* Vector lanes by index without vstore (a library call on PoCL). */
 typedef union {

@@ -7,7 +7,7 @@ arithmetic (Embree's single-ray layout). The binary tree stays the builder's pro
 records where each child box comes from, so a refit is the binary refit plus one copy launch.
 
 Layouts are named ``"binary"`` (the GPU's, ``kernels/traverse.h`` with ``TRACE_WIDE=0``) and
-``"wide"`` (``TRACE_WIDE=1``); :func:`default_layout` picks by device type.
+``"wide"`` (``TRACE_WIDE=1``); the runtime's ``bvh_layout`` picks by device type.
 """
 
 from __future__ import annotations
@@ -20,7 +20,6 @@ import pyopencl as cl
 from kernels.runtime import Runtime
 from raytrace.sort import Launch
 
-LAYOUTS = ("binary", "wide")
 WIDTH = 8          #: children per wide node (WIDE_WIDTH in kernels/bvh.h)
 BLOCK = 4          #: triangles per block (WIDE_BLOCK)
 MAX_LEVELS = 64    #: wide tree levels the collapse launches at most (WIDE_MAX_LEVELS)
@@ -34,17 +33,6 @@ WIDE_NODE_DTYPE = np.dtype([("plane", np.float32, (6, WIDTH)), ("ref", np.int32,
 TRI_BLOCK_DTYPE = np.dtype([("v", np.float32, (3, 3, BLOCK)), ("prim", np.int32, BLOCK)])
 WIDE_INFO_DTYPE = np.dtype([("level_count", np.int32, MAX_LEVELS), ("n_nodes", np.int32),
                             ("n_blocks", np.int32), ("truncated", np.int32), ("pad", np.int32)])
-
-
-def default_layout(rt: Runtime) -> str:
-    """``"binary"`` on a GPU, ``"wide"`` on a CPU device."""
-    return "binary" if rt.is_gpu else "wide"
-
-
-def check_layout(layout: str) -> str:
-    if layout not in LAYOUTS:
-        raise ValueError(f"BVH layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
-    return layout
 
 
 def wide_node_bound(n_tris: int) -> int:
@@ -114,7 +102,7 @@ class WideBvh:
         if depth_bound > MAX_LEVELS:
             raise ValueError(f"wide BVH: the binary tree may be {depth_bound} levels deep, more "
                              f"than the {MAX_LEVELS} the wide tree holds")
-        self.rt, self.blas, self.storage = rt, blas, storage
+        self.rt, self.storage = rt, storage
         prg = rt.program("bvh_wide.cl")
         s, b = storage, blas.storage
         self._levels = []
@@ -133,7 +121,6 @@ class WideBvh:
                    np.int32(s.block_base), s.src, s.nodes, s.block_src, s.blocks)
         n_work = max(wide_node_bound(blas.n_triangles), block_bound(blas.n_triangles))
         self._refit = Launch(rt, f"{stage}.wide.refit", k, min(n_work, cap), _WG)
-        self._kernels = [lv.kernel for lv in self._levels] + [k]  # keep bound kernels alive
 
     @property
     def root(self) -> int:

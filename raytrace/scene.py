@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 import pyopencl as cl
 
-from kernels.runtime import Runtime
+from kernels.runtime import Runtime, check_bvh_layout
 from raytrace.bvh import (
     DEFAULT_LEAF_SIZE,
     INFO_DTYPE,
@@ -28,11 +28,7 @@ from raytrace.bvh import (
     node_count,
     vertices_to_float4,
 )
-from raytrace.bvh_wide import (
-    DEFAULT_WIDE_LEAF_SIZE,
-    WideStorage,
-    check_layout,
-)
+from raytrace.bvh_wide import DEFAULT_WIDE_LEAF_SIZE, WideStorage
 from raytrace.sort import Launch, make_sorter
 
 TLAS_LEAF_SIZE = 1
@@ -94,7 +90,7 @@ class Scene:
 
     def __init__(self, rt: Runtime, *, leaf_size: int | None = None, layout: str | None = None,
                  stage: str = "bvh"):
-        self.layout = check_layout(rt.bvh_layout if layout is None else layout)
+        self.layout = check_bvh_layout(rt.bvh_layout if layout is None else layout)
         if leaf_size is None:
             leaf_size = DEFAULT_WIDE_LEAF_SIZE if self.wide else DEFAULT_LEAF_SIZE
         self.rt, self.leaf_size, self.stage = rt, int(leaf_size), stage
@@ -222,6 +218,9 @@ class Scene:
         # the instance records' BLAS roots: the binary root (in the header) or the wide root
         roots = [w.node_base for w in wide] if self.wide else [-1] * len(counts)
         self.mesh_wide_root = rt.to_device(np.array(roots or [0], np.int32))
+        # the BLAS arrays the tracing kernels read (SCENE_PARAMS)
+        self._trace_blas = ((wide[0].nodes, wide[0].blocks) if self.wide and wide
+                            else (self.blas_nodes, self.blas_tris))
         node_base = tri_base = 0
         for i, rec in enumerate(self.meshes):
             rec.node_base, rec.tri_base = node_base, tri_base
@@ -243,6 +242,7 @@ class Scene:
         if not hasattr(self, "blas_nodes"):
             self.blas_nodes = rt.buffer(NODE_DTYPE.itemsize)
             self.blas_tris = rt.buffer(TRI_DTYPE.itemsize)
+            self._trace_blas = (self.blas_nodes, self.blas_tris)
 
     def _allocate_tlas(self, n: int) -> None:
         rt = self.rt
@@ -300,13 +300,8 @@ class Scene:
     # -- kernels' view ----------------------------------------------------------------------
     def trace_args(self) -> list:
         """Buffers for ``SCENE_PARAMS`` (kernels/scene.h), in order; valid after update()."""
-        if self.wide:
-            w = self.meshes[0].blas.wide.storage if self.meshes and self.meshes[0].blas else None
-            nodes, prims = (w.nodes, w.blocks) if w else (self.blas_nodes, self.blas_tris)
-        else:
-            nodes, prims = self.blas_nodes, self.blas_tris
-        return [self.tlas_info, self.tlas_nodes, self.tlas_prims, self.instances, nodes, prims,
-                self.trace_stats]
+        return [self.tlas_info, self.tlas_nodes, self.tlas_prims, self.instances,
+                *self._trace_blas, self.trace_stats]
 
     def check(self) -> dict:
         """Read the device's guards (synchronises): raise ValueError on non-finite vertices or a
@@ -315,6 +310,8 @@ class Scene:
         bad = 0
         for i, rec in enumerate(self.meshes):
             if rec.blas is not None:
+                if rec.blas.wide is not None:
+                    rec.blas.wide.check()
                 n_bad = int(rec.blas.info()["n_bad"])
                 if n_bad:
                     raise ValueError(f"mesh {i}: {n_bad} triangles have a NaN or infinite vertex "

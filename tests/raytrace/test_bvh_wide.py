@@ -16,7 +16,7 @@ from raytrace import RayQuery, Scene
 from raytrace.bvh import HIT_DTYPE, tree_report, vertices_to_float4
 from raytrace.bvh_wide import BLOCK, WIDTH, block_bound, wide_node_bound
 from raytrace.query import intersect_reference, pack_rays
-from tests.raytrace.test_intersect_watertight import edges, icosphere
+from tests.raytrace.test_intersect_watertight import leak_rays
 from tests.raytrace.test_scene import affine, rotation
 
 
@@ -595,21 +595,7 @@ def test_renderer_refuses_a_scene_of_the_other_layout(rt):
 @pytest.mark.parametrize("leaf_size", [1, 4, 15])
 @pytest.mark.parametrize("bumpy", [False, True])
 def test_closed_mesh_never_leaks(rt, bumpy, leaf_size):
-    rng = np.random.default_rng(12)
-    v, f = icosphere(3)
-    if bumpy:  # still star-shaped around the centre, but no longer convex
-        v = v * (1 + 0.3 * rng.random((len(v), 1)))
-    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-    center = np.array([0.37, -1.21, 2.05])
-    v = (v @ q.T * 3.1 + center).astype(np.float32)   # awkward floats everywhere
-    e = edges(f)
-    targets = np.concatenate([v.astype(np.float64),
-                              0.5 * (v[e[:, 0]].astype(np.float64) + v[e[:, 1]])])
-    # from the centre towards each shared vertex and edge midpoint, and from outside along the
-    # same radial line towards the centre: both must cross the closed surface
-    o_out = targets + 2.0 * (targets - center)
-    o = np.concatenate([np.broadcast_to(center, targets.shape), o_out])
-    d = np.concatenate([targets - center, center - o_out])
+    v, f, o, d, n_targets = leak_rays(bumpy)
     scene = make_scene(rt, "wide", [(v, f)], leaf_size=leaf_size)
     check_wide(scene.blas(0), v, f)
     hits = trace(rt, scene, o, d)
@@ -619,4 +605,4 @@ def test_closed_mesh_never_leaks(rt, bumpy, leaf_size):
     assert_same_hits(hits, trace(rt, make_scene(rt, "binary", [(v, f)]), o, d))
     if not bumpy:  # from the centre of a convex sphere the first hit is the target (t = 1)
         assert np.allclose(hits["t"][: len(v)], 1.0, atol=1e-5)
-        assert np.all(hits["t"][: len(targets)] <= 1.0 + 1e-5)
+        assert np.all(hits["t"][:n_targets] <= 1.0 + 1e-5)

@@ -39,8 +39,11 @@ def edges(tri):
     return np.unique(e, axis=0)
 
 
-@pytest.mark.parametrize("bumpy", [False, True])
-def test_closed_mesh_never_leaks(rt, bumpy):
+def leak_rays(bumpy: bool):
+    """A closed icosphere (made non-convex when ``bumpy``), moved to awkward floats, and rays that
+    must all hit it: from the centre towards each shared vertex and edge midpoint (the first
+    ``n_targets`` rays) and from outside along the same radial line towards the centre.
+    Returns (vertices, faces, origins, directions, n_targets)."""
     rng = np.random.default_rng(12)
     v, f = icosphere(3)
     if bumpy:  # still star-shaped around the centre, but no longer convex
@@ -51,19 +54,19 @@ def test_closed_mesh_never_leaks(rt, bumpy):
     e = edges(f)
     targets = np.concatenate([v.astype(np.float64),
                               0.5 * (v[e[:, 0]].astype(np.float64) + v[e[:, 1]])])
-    # from inside (the centre) towards each target, and from outside along the radial line
-    # through the target towards the centre: both must cross the closed surface
-    o_in = np.broadcast_to(center, targets.shape)
-    d_in = targets - center
     o_out = targets + 2.0 * (targets - center)
-    d_out = center - o_out
-    o = np.concatenate([o_in, o_out])
-    d = np.concatenate([d_in, d_out])
+    o = np.concatenate([np.broadcast_to(center, targets.shape), o_out])
+    d = np.concatenate([targets - center, center - o_out])
+    return v, f, o, d, len(targets)
+
+
+@pytest.mark.parametrize("bumpy", [False, True])
+def test_closed_mesh_never_leaks(rt, bumpy):
+    v, f, o, d, n_in = leak_rays(bumpy)
     hits = intersect(v, f, o, d, device=rt)
     assert len(o) > 5000
     assert np.all(hits["prim"] >= 0), f"{np.sum(hits['prim'] < 0)} rays leaked"
     # from the centre the first hit is at the target itself (t = 1) for a convex sphere
     if not bumpy:
-        n_in = len(targets)
         assert np.allclose(hits["t"][: len(v)], 1.0, atol=1e-5)
         assert np.all(hits["t"][:n_in] <= 1.0 + 1e-5)
