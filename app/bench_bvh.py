@@ -155,9 +155,12 @@ def timed(rt, fn, reps: int) -> tuple[float, float, dict]:
     return float(np.median(walls)), float(np.median(gpus)), per_stage
 
 
-def embree_rate(vertices, triangles, o, d, reps: int = 3) -> dict | None:
+def embree_rate(vertices, triangles, o, d, reps: int = 3, ours=None) -> dict | None:
     """Embree (embreex, robust mode) single-thread closest-hit rate on the same rays, or None:
-    the median of ``reps`` runs after a warm-up, as for ours."""
+    the median of ``reps`` runs after a warm-up, as for ours. With ``ours`` (a callable that runs
+    our trace to completion), the two alternate run by run and ``paired_ratio`` is the median
+    over the pairs of our rate over Embree's: both sides of a pair see the same load on a shared
+    host, where medians taken minutes apart need not."""
     try:
         from embreex import mesh_construction, rtcore_scene
     except ImportError:
@@ -167,14 +170,19 @@ def embree_rate(vertices, triangles, o, d, reps: int = 3) -> dict | None:
                                    triangles.astype(np.int32))
     o32, d32 = np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
     scene.run(o32[:1000], d32[:1000], query="INTERSECT", output=1)  # warm-up (build)
-    walls, cpus = [], []
+    walls, cpus, ratios = [], [], []
     for _ in range(max(reps, 1)):
         t0, c0 = time.perf_counter(), time.process_time()
         res = scene.run(o32, d32, query="INTERSECT", output=1)
         walls.append(time.perf_counter() - t0)
         cpus.append(time.process_time() - c0)
+        if ours is not None:
+            t0 = time.perf_counter()
+            ours()
+            ratios.append(walls[-1] / (time.perf_counter() - t0))
     return {"Mrays_s": len(o) / np.median(walls) / 1e6,
-            "Mrays_per_cpu_s": len(o) / np.median(cpus) / 1e6, "prim": np.asarray(res["primID"])}
+            "Mrays_per_cpu_s": len(o) / np.median(cpus) / 1e6, "prim": np.asarray(res["primID"]),
+            "paired_ratio": float(np.median(ratios)) if ratios else None}
 
 
 # -- the benchmark ------------------------------------------------------------------------------
@@ -259,14 +267,22 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
                f"{row[f'{kind}_gpu_Mrays_s']:.1f}), hits {row[f'{kind}_hit_frac']:.4f}, "
                f"check {row[f'{kind}_check']} ({chk['checked']} rays)")
         if args.embree and len(triangles) <= args.embree_max_tris:
-            emb = embree_rate(vertices, triangles, o, d, args.reps)
+            def ours(q=q):
+                q.enqueue(args.local_size)
+                rt.finish()
+
+            emb = embree_rate(vertices, triangles, o, d, args.reps, ours=ours)
             if emb is not None:
+                rt.timer.collect()  # the paired runs' events
                 row[f"{kind}_embree_1t_Mrays_s"] = emb["Mrays_s"]
                 row[f"{kind}_embree_1t_Mrays_per_cpu_s"] = emb["Mrays_per_cpu_s"]
                 row[f"{kind}_vs_embree_1t"] = row[f"{kind}_Mrays_s"] / emb["Mrays_s"]
+                row[f"{kind}_vs_embree_1t_paired"] = emb["paired_ratio"]
                 row[f"{kind}_embree_prim_agreement"] = float(np.mean(emb["prim"] ==
                                                                      hits["prim"]))
-                msg += f"; embree 1 thread {emb['Mrays_s']:.1f} Mrays/s"
+                msg += (f"; embree 1 thread {emb['Mrays_s']:.1f} Mrays/s (ours "
+                        f"{row[f'{kind}_vs_embree_1t']:.2f}x, paired runs "
+                        f"{emb['paired_ratio']:.2f}x)")
         if f"{kind}_other_Mrays_s" in row:
             msg += (f"; {other.layout} layout {row[f'{kind}_other_Mrays_s']:.2f} Mrays/s (same "
                     f"hits {row[f'{kind}_other_same_hits']:.6f})")
@@ -285,16 +301,16 @@ def bench_grid(rt, n: int, args, rays: dict, log) -> dict:
 
 
 def bench_sorts(rt, n: int, reps: int, log) -> dict:
-    """Our radix sort vs pyopencl.algorithm.RadixSort on n random 32-bit keys (and values)."""
-    from raytrace.sort import RadixSorter
+    """Our radix sort (the default digit width, and 4 and 8 bits per pass) vs
+    pyopencl.algorithm.RadixSort on n random 32-bit keys (and values)."""
+    from raytrace.sort import RadixSorter, default_radix_bits
 
     rng = np.random.default_rng(3)
     keys = rng.integers(0, 2**32, n, dtype=np.uint64).astype(np.uint32)
     vals = np.arange(n, dtype=np.uint32)
     kb, vb = rt.to_device(keys), rt.to_device(vals)
-    sorter = RadixSorter(rt, kb, vb, n, stage="bench.sort")
 
-    def ours():
+    def ours(sorter):
         cl.enqueue_copy(rt.queue, kb, keys)
         cl.enqueue_copy(rt.queue, vb, vals)
         rt.finish()
@@ -303,10 +319,13 @@ def bench_sorts(rt, n: int, reps: int, log) -> dict:
         rt.finish()
         return (time.perf_counter() - t0) * 1e3
 
-    out = {}
-    ours()
-    out["sort_ours_ms"] = float(np.median([ours() for _ in range(reps)]))
-    assert np.array_equal(rt.to_host(kb, np.uint32, n), np.sort(keys)), "radix sort wrong"
+    out = {"sort_default_radix_bits": default_radix_bits(n)}
+    for bits in (4, 8):
+        sorter = RadixSorter(rt, kb, vb, n, radix_bits=bits, stage="bench.sort")
+        ours(sorter)
+        out[f"sort_ours{bits}_ms"] = float(np.median([ours(sorter) for _ in range(reps)]))
+        assert np.array_equal(rt.to_host(kb, np.uint32, n), np.sort(keys)), "radix sort wrong"
+    out["sort_ours_ms"] = out[f"sort_ours{default_radix_bits(n)}_ms"]
     try:
         import pyopencl.array as cla
         from pyopencl.algorithm import RadixSort

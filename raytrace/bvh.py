@@ -188,7 +188,6 @@ class Blas:
         self._reset_build()
         self._bounds()
         self._morton()
-        self.rt.queue.flush()  # let the device start while the sort is being enqueued
         self._sorter.enqueue()
         self._hier()  # gather + bottom-up boxes in one launch
         if self.wide is not None:

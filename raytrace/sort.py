@@ -1,9 +1,9 @@
 """Device sorts of (uint32 key, uint32 value) pairs for the LBVH builder.
 
-* :class:`RadixSorter`: least-significant-digit radix sort, 4 bits per pass, three launches per
-  pass, two when the input has at most 256 tiles (``kernels/sort_radix.cl``), scratch allocated
-  once. Measured against
-  ``pyopencl.algorithm.RadixSort`` by ``lbwater bench bvh`` (see BENCHMARKS.md).
+* :class:`RadixSorter`: least-significant-digit radix sort, 8 or 4 bits per pass, three launches
+  per pass, two when the input has at most 256 tiles (``kernels/sort_radix.cl``), scratch
+  allocated once. Measured against ``pyopencl.algorithm.RadixSort`` by ``lbwater bench bvh`` (see
+  BENCHMARKS.md).
 * :class:`LocalSorter`: one work-group bitonic sort in local memory for n <= 2048 (one launch),
   used for the TLAS and small meshes.
 
@@ -20,7 +20,8 @@ import pyopencl as cl
 
 from kernels.runtime import Runtime
 
-RADIX_BITS = 4
+#: Digit widths the kernels support; see :func:`default_radix_bits` for the choice.
+RADIX_BITS_CHOICES = (4, 8)
 RADIX_WG = 256
 RADIX_ITEMS = 8
 RADIX_TILE = RADIX_WG * RADIX_ITEMS
@@ -89,37 +90,57 @@ class LocalSorter:
             self._launch()
 
 
+def n_tiles(n: int) -> int:
+    """Tiles (work-groups) a radix pass over ``n`` keys uses."""
+    return max(1, -(-int(n) // RADIX_TILE))
+
+
+def default_radix_bits(n: int) -> int:
+    """8-bit digits (half the passes, so half the launches) while the scatter sums the tile
+    counts itself; 4-bit above that, where a scan over 256 counts per tile would cost more than
+    the passes it saves (measured in BENCHMARKS.md)."""
+    return 8 if n_tiles(n) <= FUSED_SCAN_MAX_TILES else 4
+
+
 class RadixSorter:
     """Sorts ``n`` pairs by the low ``key_bits`` bits of the key, in place.
 
-    ``ceil(key_bits / 4)`` passes ping-pong between the caller's buffers and one scratch pair;
-    an odd pass count ends with one copy back. Kernel objects are made and bound once per pass.
+    ``ceil(key_bits / radix_bits)`` passes ping-pong between the caller's buffers and one scratch
+    pair; an odd pass count ends with one copy back. ``radix_bits``: 4 or 8 bits per pass, None
+    for :func:`default_radix_bits`. Kernel objects are made and bound once per pass.
     """
 
     def __init__(self, rt: Runtime, keys: cl.Buffer, vals: cl.Buffer, n: int, *,
-                 key_bits: int = 32, stage: str = "sort"):
+                 key_bits: int = 32, radix_bits: int | None = None, stage: str = "sort"):
         if not 1 <= key_bits <= 32:
             raise ValueError(f"key_bits must lie in [1, 32], got {key_bits}")
+        if radix_bits is None:
+            radix_bits = default_radix_bits(n)
+        if radix_bits not in RADIX_BITS_CHOICES:
+            raise ValueError(f"radix_bits must be one of {RADIX_BITS_CHOICES}, got {radix_bits}")
         self.rt, self.n, self.stage = rt, int(n), stage
         self.keys, self.vals = keys, vals
-        self.n_tiles = max(1, -(-self.n // RADIX_TILE))
-        self.passes = -(-key_bits // RADIX_BITS)
+        self.radix_bits = int(radix_bits)
+        self.n_tiles = n_tiles(self.n)
+        self.passes = -(-key_bits // self.radix_bits)
         self._alt_keys = rt.buffer(4 * self.n)
         self._alt_vals = rt.buffer(4 * self.n)
-        self._counts = rt.buffer(4 * (1 << RADIX_BITS) * self.n_tiles)
+        n_counts = (1 << self.radix_bits) * self.n_tiles
+        self._counts = rt.buffer(4 * n_counts)
         # one work-group scans all tile counts: as wide as the device allows on a GPU
         self.scan_wg = SCAN_WG if not rt.is_gpu else min(1024, rt.device.max_work_group_size)
-        prg = rt.program("sort_radix.cl", {"SCAN_WG": self.scan_wg})
+        prg = rt.program("sort_radix.cl", {"SCAN_WG": self.scan_wg,
+                                           "RADIX_BITS": self.radix_bits})
         self.fused_scan = self.n_tiles <= FUSED_SCAN_MAX_TILES
         scan = cl.Kernel(prg, "radix_scan")
-        scan.set_args(np.uint32((1 << RADIX_BITS) * self.n_tiles), self._counts)
+        scan.set_args(np.uint32(n_counts), self._counts)
         self._scan = Launch(rt, stage, scan, self.scan_wg, self.scan_wg)
         self._passes = []
         gs = self.n_tiles * RADIX_WG
         src = (keys, vals)
         dst = (self._alt_keys, self._alt_vals)
         for p in range(self.passes):
-            shift = np.uint32(RADIX_BITS * p)
+            shift = np.uint32(self.radix_bits * p)
             hist = cl.Kernel(prg, "radix_histogram")
             hist.set_args(np.uint32(self.n), shift, src[0], self._counts, np.uint32(self.n_tiles))
             scat = cl.Kernel(prg, "radix_scatter")
@@ -145,8 +166,9 @@ class RadixSorter:
 
 
 def make_sorter(rt: Runtime, keys: cl.Buffer, vals: cl.Buffer, n: int, *, key_bits: int = 32,
-                method: SortMethod = SortMethod.AUTO, stage: str = "sort"):
+                method: SortMethod = SortMethod.AUTO, radix_bits: int | None = None,
+                stage: str = "sort"):
     """The sorter for ``n`` pairs: :class:`LocalSorter` when it fits (AUTO/LOCAL), else radix."""
     if method == SortMethod.LOCAL or (method == SortMethod.AUTO and n <= LOCAL_MAX):
         return LocalSorter(rt, keys, vals, n, stage=stage)
-    return RadixSorter(rt, keys, vals, n, key_bits=key_bits, stage=stage)
+    return RadixSorter(rt, keys, vals, n, key_bits=key_bits, radix_bits=radix_bits, stage=stage)

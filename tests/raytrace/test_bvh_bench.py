@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from app.bench_bvh import check_grid_hits, rays_incoherent, rays_primary
 from app.cli import main
@@ -21,8 +22,23 @@ def test_bench_runs_and_writes_results(tmp_path, rt):
     assert row["primary_hit_agreement"] == 1.0 and row["incoherent_checked"] == 50
     assert row["build_ms"] > 0 and row["primary_Mrays_s"] > 0
     assert row["sort_ours_ms"] > 0                       # the sort comparison ran too
+    assert row["sort_ours4_ms"] > 0 and row["sort_ours8_ms"] > 0
+    assert row["sort_ours_ms"] == row[f"sort_ours{row['sort_default_radix_bits']}_ms"]
     assert res["meshes"][0]["tris"] == 4968
     assert (tmp_path / "bvh_grids.csv").read_text().startswith("grid,")
+
+
+def test_bench_pairs_our_runs_with_embree_runs(tmp_path, rt):
+    pytest.importorskip("embreex")
+    status = main(["bench", "bvh", "--sizes", "17", "--rays", "small", "--reps", "3",
+                   "--meshes", "", "--no-sort-compare", "--check-rays", "20",
+                   "--out", str(tmp_path)])
+    assert status == 0
+    row = json.loads((tmp_path / "bvh.json").read_text())["grids"][0]
+    for kind in ("primary", "incoherent"):
+        assert row[f"{kind}_embree_1t_Mrays_s"] > 0
+        assert row[f"{kind}_vs_embree_1t_paired"] > 0
+        assert row[f"{kind}_embree_prim_agreement"] > 0.99
 
 
 def test_bench_check_detects_wrong_hits(rt):

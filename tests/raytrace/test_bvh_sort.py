@@ -4,27 +4,77 @@ import numpy as np
 import pytest
 
 from raytrace.bvh import Blas, vertices_to_float4
-from raytrace.sort import FUSED_SCAN_MAX_TILES, RADIX_TILE, LocalSorter, RadixSorter
+from raytrace.sort import (
+    FUSED_SCAN_MAX_TILES,
+    RADIX_TILE,
+    LocalSorter,
+    RadixSorter,
+    default_radix_bits,
+)
 
 
-@pytest.mark.parametrize("n", [1, 2, 3, 255, 2048, 2049, 70_000,
-                               FUSED_SCAN_MAX_TILES * RADIX_TILE + 1])
-def test_radix_sort_is_a_stable_sort(rt, n):
-    rng = np.random.default_rng(n)
+def random_keys(n, seed):
+    rng = np.random.default_rng(seed)
     keys = rng.integers(0, 2**32, n, dtype=np.uint64).astype(np.uint32)
     keys[rng.random(n) < 0.3] = 7            # many duplicates
     keys[: n // 10] = 0xFFFFFFFF             # the padding key itself
-    vals = np.arange(n, dtype=np.uint32)
-    sorters = [RadixSorter] + ([LocalSorter] if n <= 2048 else [])
-    for cls in sorters:
-        kb, vb = rt.to_device(keys), rt.to_device(vals)
-        s = cls(rt, kb, vb, n)
-        s.enqueue()
-        order = np.argsort(keys, kind="stable")
-        assert np.array_equal(rt.to_host(kb, np.uint32, n), keys[order]), cls.__name__
-        assert np.array_equal(rt.to_host(vb, np.uint32, n), order), cls.__name__
-    if n > FUSED_SCAN_MAX_TILES * RADIX_TILE:
-        assert not s.fused_scan  # this size exercises the separate scan launch
+    return keys
+
+
+def sort_on_device(rt, sorter_factory, keys):
+    n = len(keys)
+    kb, vb = rt.to_device(keys), rt.to_device(np.arange(n, dtype=np.uint32))
+    sorter = sorter_factory(rt, kb, vb, n)
+    sorter.enqueue()
+    return sorter, rt.to_host(kb, np.uint32, n), rt.to_host(vb, np.uint32, n)
+
+
+@pytest.mark.parametrize("radix_bits", [4, 8])
+@pytest.mark.parametrize("n", [1, 2, 3, 255, 2048, 2049, 70_000,
+                               FUSED_SCAN_MAX_TILES * RADIX_TILE + 1])
+def test_radix_sort_is_a_stable_sort(rt, n, radix_bits):
+    keys = random_keys(n, n)
+    order = np.argsort(keys, kind="stable")
+    sorter, got_keys, got_vals = sort_on_device(
+        rt, lambda *a: RadixSorter(*a, radix_bits=radix_bits), keys)
+    assert np.array_equal(got_keys, keys[order])
+    assert np.array_equal(got_vals, order)
+    assert sorter.passes == 32 // radix_bits
+    # sizes past the fused limit exercise the separate scan launch
+    assert sorter.fused_scan == (n <= FUSED_SCAN_MAX_TILES * RADIX_TILE)
+
+
+@pytest.mark.parametrize("n", [1, 3, 2048])
+def test_local_sort_is_a_stable_sort(rt, n):
+    keys = random_keys(n, n)
+    order = np.argsort(keys, kind="stable")
+    _, got_keys, got_vals = sort_on_device(rt, LocalSorter, keys)
+    assert np.array_equal(got_keys, keys[order])
+    assert np.array_equal(got_vals, order)
+
+
+@pytest.mark.parametrize("key_bits", [30, 13])
+def test_radix_sort_of_the_low_key_bits_with_wide_digits(rt, key_bits):
+    """A key width that is no multiple of the digit: the last pass sorts a partial digit (bits
+    above key_bits are zero, as the Morton kernel writes them) and the pass count is odd."""
+    n = 9000
+    rng = np.random.default_rng(key_bits)
+    keys = (rng.integers(0, 2**key_bits, n, dtype=np.uint64)).astype(np.uint32)
+    keys[::7] = keys[3]                      # runs of equal keys
+    order = np.argsort(keys, kind="stable")
+    sorter, got_keys, got_vals = sort_on_device(
+        rt, lambda *a: RadixSorter(*a, key_bits=key_bits, radix_bits=8), keys)
+    assert sorter.passes == -(-key_bits // 8)
+    assert np.array_equal(got_keys, keys[order])
+    assert np.array_equal(got_vals, order)
+
+
+def test_radix_width_choice_and_bad_width(rt):
+    assert default_radix_bits(FUSED_SCAN_MAX_TILES * RADIX_TILE) == 8
+    assert default_radix_bits(FUSED_SCAN_MAX_TILES * RADIX_TILE + 1) == 4
+    kb = rt.to_device(np.zeros(4, np.uint32))
+    with pytest.raises(ValueError, match="radix_bits must be one of"):
+        RadixSorter(rt, kb, kb, 4, radix_bits=5)
 
 
 def morton_reference(c, key_bits=32, max_axis_bits=21):
