@@ -319,13 +319,14 @@ def bench_sorts(rt, n: int, reps: int, log) -> dict:
         rt.finish()
         return (time.perf_counter() - t0) * 1e3
 
-    out = {"sort_default_radix_bits": default_radix_bits(n)}
+    bits_default = default_radix_bits(n, rt.is_gpu)
+    out = {"sort_default_radix_bits": bits_default}
     for bits in (4, 8):
         sorter = RadixSorter(rt, kb, vb, n, radix_bits=bits, stage="bench.sort")
         ours(sorter)
         out[f"sort_ours{bits}_ms"] = float(np.median([ours(sorter) for _ in range(reps)]))
         assert np.array_equal(rt.to_host(kb, np.uint32, n), np.sort(keys)), "radix sort wrong"
-    out["sort_ours_ms"] = out[f"sort_ours{default_radix_bits(n)}_ms"]
+    out["sort_ours_ms"] = out[f"sort_ours{bits_default}_ms"]
     try:
         import pyopencl.array as cla
         from pyopencl.algorithm import RadixSort
@@ -413,7 +414,7 @@ def add_arguments(p) -> None:
                    help="grid vertices per side, comma-separated (default: %(default)s)")
     p.add_argument("--meshes", default=",".join(MESHES),
                    help="meshes in scenes/models to time builds of ('' for none)")
-    p.add_argument("--reps", type=int, default=10, help="timed repetitions (median)")
+    p.add_argument("--reps", type=int, default=20, help="timed repetitions (median)")
     p.add_argument("--layout", choices=["binary", "wide"], default=None,
                    help="BLAS layout (default: binary on a GPU, wide on a CPU)")
     p.add_argument("--leaf-size", type=int, default=None,

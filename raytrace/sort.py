@@ -95,11 +95,11 @@ def n_tiles(n: int) -> int:
     return max(1, -(-int(n) // RADIX_TILE))
 
 
-def default_radix_bits(n: int) -> int:
-    """8-bit digits (half the passes, so half the launches) while the scatter sums the tile
-    counts itself; 4-bit above that, where a scan over 256 counts per tile would cost more than
-    the passes it saves (measured in BENCHMARKS.md)."""
-    return 8 if n_tiles(n) <= FUSED_SCAN_MAX_TILES else 4
+def default_radix_bits(n: int, gpu: bool = True) -> int:
+    """8-bit digits (half the passes, so half the launches) on a CPU device, and on a GPU while
+    the scatter sums the tile counts itself; 4-bit on a GPU above that, where the scan over 256
+    counts per tile costs more than the passes it saves (both measured in BENCHMARKS.md)."""
+    return 8 if not gpu or n_tiles(n) <= FUSED_SCAN_MAX_TILES else 4
 
 
 class RadixSorter:
@@ -107,7 +107,7 @@ class RadixSorter:
 
     ``ceil(key_bits / radix_bits)`` passes ping-pong between the caller's buffers and one scratch
     pair; an odd pass count ends with one copy back. ``radix_bits``: 4 or 8 bits per pass, None
-    for :func:`default_radix_bits`. Kernel objects are made and bound once per pass.
+    for :func:`default_radix_bits` on this device. Kernel objects are made and bound once per pass.
     """
 
     def __init__(self, rt: Runtime, keys: cl.Buffer, vals: cl.Buffer, n: int, *,
@@ -115,7 +115,7 @@ class RadixSorter:
         if not 1 <= key_bits <= 32:
             raise ValueError(f"key_bits must lie in [1, 32], got {key_bits}")
         if radix_bits is None:
-            radix_bits = default_radix_bits(n)
+            radix_bits = default_radix_bits(n, rt.is_gpu)
         if radix_bits not in RADIX_BITS_CHOICES:
             raise ValueError(f"radix_bits must be one of {RADIX_BITS_CHOICES}, got {radix_bits}")
         self.rt, self.n, self.stage = rt, int(n), stage

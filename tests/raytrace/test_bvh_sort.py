@@ -70,9 +70,12 @@ def test_radix_sort_of_the_low_key_bits_with_wide_digits(rt, key_bits):
 
 
 def test_radix_width_choice_and_bad_width(rt):
-    assert default_radix_bits(FUSED_SCAN_MAX_TILES * RADIX_TILE) == 8
-    assert default_radix_bits(FUSED_SCAN_MAX_TILES * RADIX_TILE + 1) == 4
-    kb = rt.to_device(np.zeros(4, np.uint32))
+    fused_max = FUSED_SCAN_MAX_TILES * RADIX_TILE
+    assert default_radix_bits(fused_max, gpu=True) == 8
+    assert default_radix_bits(fused_max + 1, gpu=True) == 4
+    assert default_radix_bits(fused_max + 1, gpu=False) == 8
+    kb = rt.to_device(np.zeros(fused_max + 1, np.uint32))
+    assert RadixSorter(rt, kb, kb, fused_max + 1).radix_bits == (4 if rt.is_gpu else 8)
     with pytest.raises(ValueError, match="radix_bits must be one of"):
         RadixSorter(rt, kb, kb, 4, radix_bits=5)
 
