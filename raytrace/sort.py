@@ -37,7 +37,7 @@ class Launch:
 
     Calling it enqueues the kernel and records the event under the stage in ``rt.timer`` (the
     contract of ``Runtime.launch`` without its per-call size conversions: a BVH build is some
-    twenty launches, and at small sizes their host cost is what the wall clock shows).
+    dozen launches or more, and at small sizes their host cost is what the wall clock shows).
     """
 
     __slots__ = ("rt", "stage", "kernel", "global_size", "local_size")
