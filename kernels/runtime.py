@@ -163,10 +163,11 @@ class Runtime:
             return self.buffer(4, flags)
         return cl.Buffer(self.context, flags | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
 
-    def to_host(self, buf: cl.Buffer, dtype, count: int) -> np.ndarray:
+    def to_host(self, buf: cl.Buffer, dtype, count: int, first: int = 0) -> np.ndarray:
+        """``count`` records of ``dtype`` from record ``first`` of ``buf`` (waits for the copy)."""
         out = np.empty(count, dtype=dtype)
         if count:
-            cl.enqueue_copy(self.queue, out, buf)
+            cl.enqueue_copy(self.queue, out, buf, src_offset=first * out.dtype.itemsize)
         return out
 
 

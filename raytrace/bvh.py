@@ -211,10 +211,7 @@ class Blas:
     # -- host inspection (synchronises; not for the frame loop) -------------------------------
     def info(self) -> np.void:
         """The device header (root, n_prims, n_bad, root box); waits for the queue."""
-        out = np.empty(1, INFO_DTYPE)
-        cl.enqueue_copy(self.rt.queue, out, self.storage.infos,
-                        src_offset=self.storage.info_index * INFO_DTYPE.itemsize)
-        return out[0]
+        return self.rt.to_host(self.storage.infos, INFO_DTYPE, 1, self.storage.info_index)[0]
 
     def check(self) -> None:
         """Raise ValueError if the last build or refit saw non-finite vertex coordinates (or the
@@ -230,11 +227,8 @@ class Blas:
     def host_arrays(self) -> dict:
         """Nodes, triangles (leaf order) and header of this BVH as NumPy arrays (absolute refs)."""
         s, n = self.storage, self.n_triangles
-        nodes = np.empty(node_count(n), NODE_DTYPE)
-        tris = np.empty(n, TRI_DTYPE)
-        q = self.rt.queue
-        cl.enqueue_copy(q, nodes, s.nodes, src_offset=s.node_base * NODE_DTYPE.itemsize)
-        cl.enqueue_copy(q, tris, s.tris, src_offset=s.tri_base * TRI_DTYPE.itemsize)
+        nodes = self.rt.to_host(s.nodes, NODE_DTYPE, node_count(n), s.node_base)
+        tris = self.rt.to_host(s.tris, TRI_DTYPE, n, s.tri_base)
         return {"nodes": nodes, "tris": tris, "info": self.info(), "node_base": s.node_base,
                 "tri_base": s.tri_base}
 

@@ -138,24 +138,14 @@ class WideBvh:
 
     # -- host inspection (synchronises) -------------------------------------------------------
     def info(self) -> np.void:
-        out = np.empty(1, WIDE_INFO_DTYPE)
-        cl.enqueue_copy(self.rt.queue, out, self.storage.infos,
-                        src_offset=self.storage.info_index * WIDE_INFO_DTYPE.itemsize)
-        return out[0]
+        return self.rt.to_host(self.storage.infos, WIDE_INFO_DTYPE, 1, self.storage.info_index)[0]
 
     def host_arrays(self) -> dict:
         """The wide nodes and blocks in use (absolute refs), and the header."""
         info = self.info()
         s = self.storage
-        nodes = np.empty(int(info["n_nodes"]), WIDE_NODE_DTYPE)
-        blocks = np.empty(int(info["n_blocks"]), TRI_BLOCK_DTYPE)
-        q = self.rt.queue
-        if len(nodes):
-            cl.enqueue_copy(q, nodes, s.nodes, src_offset=s.node_base * WIDE_NODE_DTYPE.itemsize)
-        if len(blocks):
-            cl.enqueue_copy(q, blocks, s.blocks,
-                            src_offset=s.block_base * TRI_BLOCK_DTYPE.itemsize)
-        q.finish()
+        nodes = self.rt.to_host(s.nodes, WIDE_NODE_DTYPE, int(info["n_nodes"]), s.node_base)
+        blocks = self.rt.to_host(s.blocks, TRI_BLOCK_DTYPE, int(info["n_blocks"]), s.block_base)
         return {"nodes": nodes, "blocks": blocks, "info": info, "node_base": s.node_base,
                 "block_base": s.block_base}
 

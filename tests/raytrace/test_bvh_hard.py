@@ -36,12 +36,19 @@ def test_all_triangles_at_one_point(rt):
     assert np.all(hits["prim"] == -1)  # a point has no area: never hit
 
 
-def test_degenerate_triangles_among_good_ones(rt):
-    rng = np.random.default_rng(8)
+def mesh_with_degenerate_triangles(rng):
+    """200 random triangles over 600 vertices; every 4th has two equal vertices and the next
+    one three collinear vertices."""
     v = rng.random((600, 3)).astype(np.float32)
     t = rng.integers(0, 600, (200, 3))
     t[::4, 2] = t[::4, 1]                                 # two equal vertices
     v[t[1::4, 2]] = 0.5 * (v[t[1::4, 0]] + v[t[1::4, 1]])  # collinear
+    return v, t
+
+
+def test_degenerate_triangles_among_good_ones(rt):
+    rng = np.random.default_rng(8)
+    v, t = mesh_with_degenerate_triangles(rng)
     o = rng.random((1500, 3)) * 1.4 - 0.2
     d = rng.normal(size=(1500, 3))
     got = intersect(v, t, o, d, device=rt)

@@ -16,6 +16,7 @@ from raytrace import RayQuery, Scene
 from raytrace.bvh import HIT_DTYPE, tree_report, vertices_to_float4
 from raytrace.bvh_wide import BLOCK, WIDTH, block_bound, wide_node_bound
 from raytrace.query import intersect_reference, pack_rays
+from tests.raytrace.test_bvh_hard import mesh_with_degenerate_triangles
 from tests.raytrace.test_intersect_watertight import leak_rays
 from tests.raytrace.test_scene import affine, rotation
 
@@ -468,10 +469,7 @@ def test_all_triangles_at_one_point(rt):
 
 def test_degenerate_triangles_among_good_ones(rt):
     rng = np.random.default_rng(8)
-    v = rng.random((600, 3)).astype(np.float32)
-    t = rng.integers(0, 600, (200, 3))
-    t[::4, 2] = t[::4, 1]                                 # two equal vertices
-    v[t[1::4, 2]] = 0.5 * (v[t[1::4, 0]] + v[t[1::4, 1]])  # collinear
+    v, t = mesh_with_degenerate_triangles(rng)
     t[2::8] = t[2::8, :1]                                 # three equal vertices
     p = v[t].astype(np.float64)
     good = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1) > 1e-3
