@@ -296,6 +296,17 @@ class Kernel:
                                          self.local_size, wait_for=wait_for)
         return rt.timer.record(self.stage, evt)
 
+    def enqueue(self, global_size: tuple, local_size: tuple | None = None, *,
+                wait_for=None) -> cl.Event:
+        """Enqueue over sizes already prepared as tuples of ints, each global size a multiple of
+        its local size (no conversion: the per-frame path of a driver that plans its sizes)."""
+        if self._unbound:
+            self._check_bound()
+        rt = self.rt
+        evt = cl.enqueue_nd_range_kernel(rt.queue, self.kernel, global_size, local_size,
+                                         wait_for=wait_for)
+        return rt.timer.record(self.stage, evt)
+
     def launch(self, global_size=None, local_size=None, *, wait_for=None) -> cl.Event:
         """Enqueue over ``global_size`` (rounded up to a multiple of ``local_size``; kernels
         guard their index), or the sizes of :meth:`set_size` when None. Records the event."""
