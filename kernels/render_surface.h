@@ -11,16 +11,20 @@
 /* The renderer's shading data (raytrace.render_scene.RenderScene.shade_bindings()): instances,
  * their world_from_object rows (the scene's transform buffer) and normal transforms (written
  * by tlas_prep), meshes, positions (float4, input order), normals (float4), uvs (float2),
- * triangles (uint x3, input order), per-triangle material ids, materials, textures, texels. */
+ * triangles (uint x3, input order), per-triangle material ids, materials, textures, texels,
+ * and the dynamic meshes' positions and normals (MESH_DYNAMIC: the buffers their writer, e.g.
+ * the water surface kernel, fills and the BVH reads; vert_offset indexes these). */
 #define RENDER_GEOM_PARAMS                                                                     \
     __global const InstanceInfo* restrict g_inst, __global const Transform* restrict g_xform, \
     __global const Transform* restrict g_nxform, __global const MeshInfo* restrict g_mesh,    \
     __global const float4* restrict g_pos, __global const float4* restrict g_nrm,             \
     __global const float2* restrict g_uv, __global const uint* restrict g_tri,                \
     __global const ushort* restrict g_tri_mat, __global const Material* restrict g_mat,       \
-    __global const TexInfo* restrict g_tex, __global const float4* restrict g_texels
+    __global const TexInfo* restrict g_tex, __global const float4* restrict g_texels,         \
+    __global const float4* restrict g_dpos, __global const float4* restrict g_dnrm
 
-#define RENDER_GEOM_ARGS g_inst, g_xform, g_nxform, g_mesh, g_pos, g_nrm, g_uv, g_tri, g_tri_mat, g_mat, g_tex, g_texels
+#define RENDER_GEOM_ARGS g_inst, g_xform, g_nxform, g_mesh, g_pos, g_nrm, g_uv, g_tri, g_tri_mat, \
+    g_mat, g_tex, g_texels, g_dpos, g_dnrm
 
 typedef struct {
     float3 p;       /* world position from the barycentrics */
@@ -50,14 +54,17 @@ inline Surface surface_at(RENDER_GEOM_PARAMS, int inst, int prim, float u, float
     const uint i0 = m.vert_offset + g_tri[3 * t];
     const uint i1 = m.vert_offset + g_tri[3 * t + 1];
     const uint i2 = m.vert_offset + g_tri[3 * t + 2];
-    const float3 p0 = g_pos[i0].xyz, p1 = g_pos[i1].xyz, p2 = g_pos[i2].xyz;
+    const bool dyn = (m.flags & MESH_DYNAMIC) != 0u;
+    __global const float4* pos = dyn ? g_dpos : g_pos;
+    __global const float4* nrm = dyn ? g_dnrm : g_nrm;
+    const float3 p0 = pos[i0].xyz, p1 = pos[i1].xyz, p2 = pos[i2].xyz;
     const float w = 1.0f - u - v;
     const Transform nx = g_nxform[inst];
     s.p = xform_point(g_xform[inst], w * p0 + u * p1 + v * p2);
     s.ng = normalize(xform_vector(nx, cross(p1 - p0, p2 - p0)));
     s.ns = s.ng;
     if (m.flags & MESH_HAS_NORMALS) {
-        const float3 n = w * g_nrm[i0].xyz + u * g_nrm[i1].xyz + v * g_nrm[i2].xyz;
+        const float3 n = w * nrm[i0].xyz + u * nrm[i1].xyz + v * nrm[i2].xyz;
         const float len2 = dot(n, n);
         if (len2 > 1e-20f) {
             const float3 ns = normalize(xform_vector(nx, n));

@@ -40,6 +40,7 @@
 #define MESH_HAS_NORMALS 1u
 #define MESH_HAS_UVS 2u
 #define MESH_TRI_MATERIALS 4u
+#define MESH_DYNAMIC 8u       /* positions/normals in the dynamic arrays (g_dpos, g_dnrm) */
 /* Depth limit and the stats buffer: stats[d] = rays traced at depth d over the frame,
  * stats[RENDER_STAT_DROPPED] = children dropped because the wavefront was full. */
 #define RENDER_MAX_DEPTH 32

@@ -2,9 +2,13 @@
 needs, in device tables bound to ``RENDER_GEOM_PARAMS`` (kernels/render_surface.h).
 
 Mesh and instance ids are those of the underlying Scene. Static meshes are copied to the device
-once; a dynamic mesh given as device buffers (the water surface written by the LBM solver) is
-copied device-to-device into the shading arrays by every :meth:`RenderScene.update`, next to
-its BLAS refit, so nothing crosses to the host during a frame.
+once into concatenated shading arrays. A dynamic mesh made by :meth:`RenderScene.add_dynamic_mesh`
+(the water surface the LBM solver writes) lives in arrays of its own, ``dyn_positions`` and
+``dyn_normals``, which the BVH and the shader read directly: its writer fills the buffers
+``add_dynamic_mesh`` returns (sub-buffers at offsets aligned to the device's
+``MEM_BASE_ADDR_ALIGN`` when there are several dynamic meshes) and nothing is copied per frame.
+A dynamic mesh given to :meth:`RenderScene.add_mesh` as foreign device buffers is still copied
+device-to-device into the shading arrays by every :meth:`RenderScene.update`.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from raytrace.render_types import (
     LIGHT,
     MATERIAL,
     MAX_LIGHTS,
+    MESH_DYNAMIC,
     MESH_HAS_NORMALS,
     MESH_HAS_UVS,
     MESH_TRI_MATERIALS,
@@ -121,6 +126,9 @@ class RenderScene:
         self.instances = np.zeros(0, INSTANCEINFO)
         self._layout_meshes = -1
         self._dirty = {"materials", "textures", "lights", "instances"}
+        self.dyn_positions = rt.buffer(16)  # the dynamic meshes' own arrays (MESH_DYNAMIC)
+        self.dyn_normals = rt.buffer(16)
+        self._dyn_vertices = 0
 
     # -- content ---------------------------------------------------------------------------
     def add_material(self, material: Material) -> int:
@@ -206,6 +214,90 @@ class RenderScene:
             "nbuf": normals if isinstance(normals, cl.Buffer) else None})
         return mesh_id
 
+    def add_dynamic_mesh(self, n_vertices: int, triangles, *, material: int = 0,
+                         tri_materials=None, normals: bool = True
+                         ) -> tuple[int, cl.Buffer, cl.Buffer | None]:
+        """A mesh whose vertices a device stage writes every frame, stored once.
+
+        Returns ``(mesh_id, vertices_buf, normals_buf)``: ``n_vertices`` float4 positions (and
+        float4 normals when ``normals``; else None) that the writer fills (e.g.
+        ``sim.write_surface(vertices_buf, normals_buf, origin)``) and that the BVH refit and the
+        shader read in place: no per-frame copy. ``triangles``: (m, 3) vertex indices (the
+        topology is fixed). The buffers stay valid until another dynamic mesh is added (which
+        moves every dynamic mesh to larger arrays, contents copied on the device); take them
+        again then with :meth:`dynamic_buffers`. Refitted by every :meth:`update`.
+        """
+        nv = int(n_vertices)
+        if nv < 3:
+            raise ValueError(f"a dynamic mesh needs n_vertices >= 3, got {n_vertices}")
+        tris = np.asarray(triangles)
+        if tris.ndim != 2 or tris.shape[1] != 3 or len(tris) < 1:
+            raise ValueError(f"triangles must have shape (m, 3) with m >= 1, got {tris.shape}")
+        if tris.min() < 0 or tris.max() >= nv:
+            raise ValueError(f"triangle indices must lie in [0, {nv - 1}]")
+        if not self.materials:
+            self.add_material(Material())
+        if not 0 <= material < len(self.materials):
+            raise ValueError(f"material {material} does not exist ({len(self.materials)} made)")
+        tris = np.ascontiguousarray(tris, np.uint32)
+        nt = len(tris)
+        tm = None
+        flags = MESH_DYNAMIC | (MESH_HAS_NORMALS if normals else 0)
+        if tri_materials is not None:
+            tm = np.asarray(tri_materials).reshape(-1)
+            if len(tm) != nt or (tm.min() < 0 or tm.max() >= len(self.materials)):
+                raise ValueError(f"tri_materials must be {nt} ids in [0, "
+                                 f"{len(self.materials) - 1}]")
+            tm = tm.astype(np.uint16)
+            flags |= MESH_TRI_MATERIALS
+        old = [m for m in self.meshes if m.get("owned")]
+        rec = {"vertices": None, "triangles": tris, "normals": None, "uvs": None,
+               "tri_materials": tm, "material": int(material), "flags": flags,
+               "n_vertices": nv, "n_triangles": nt, "dynamic": True, "owned": True,
+               "has_normals": bool(normals), "vbuf": None, "tbuf": None, "nbuf": None}
+        self._layout_dynamic(old + [rec])
+        mesh_id = self.scene.add_mesh(rec["vbuf"], self.rt.to_device(tris), dynamic=True,
+                                      n_vertices=nv, n_triangles=nt)
+        rec["tbuf"] = self.scene.mesh_record(mesh_id).triangles_buf
+        self.meshes.append(rec)
+        return mesh_id, rec["vbuf"], rec["nbuf"]
+
+    def dynamic_buffers(self, mesh_id: int) -> tuple[cl.Buffer, cl.Buffer | None]:
+        """The current (vertices, normals) buffers of a mesh made by :meth:`add_dynamic_mesh`."""
+        if not 0 <= int(mesh_id) < len(self.meshes) or not self.meshes[mesh_id].get("owned"):
+            raise ValueError(f"mesh {mesh_id} was not made by add_dynamic_mesh")
+        m = self.meshes[mesh_id]
+        return m["vbuf"], m["nbuf"]
+
+    def _layout_dynamic(self, dyn: list[dict]) -> None:
+        """Place the dynamic meshes in (new) arrays of their own, each at an offset aligned to
+        the device's MEM_BASE_ADDR_ALIGN so it can be handed out as a sub-buffer; contents of
+        meshes already placed are copied over on the device."""
+        rt = self.rt
+        align_v = max(1, rt.device.mem_base_addr_align // 8 // 16)  # in float4 vertices
+        offsets, total = [], 0
+        for m in dyn:
+            total = -(-total // align_v) * align_v
+            offsets.append(total)
+            total += m["n_vertices"]
+        pos, nrm = rt.buffer(16 * total), rt.buffer(16 * total)
+        for m, off in zip(dyn, offsets, strict=True):
+            n = 16 * m["n_vertices"]
+            if m["vbuf"] is not None:  # already placed: keep what its writer wrote
+                for dst, src in ((pos, self.dyn_positions), (nrm, self.dyn_normals)):
+                    cl.enqueue_copy(rt.queue, dst, src, src_offset=16 * m["dyn_offset"],
+                                    dst_offset=16 * off, byte_count=n)
+            m["dyn_offset"] = off
+            whole = len(dyn) == 1
+            m["vbuf"] = pos if whole else pos.get_sub_region(16 * off, n)
+            m["nbuf"] = None if not m["has_normals"] else (
+                nrm if whole else nrm.get_sub_region(16 * off, n))
+        for i, m in enumerate(self.meshes):
+            if m.get("owned"):
+                self.scene.replace_vertex_buffer(i, m["vbuf"])
+        self.dyn_positions, self.dyn_normals, self._dyn_vertices = pos, nrm, total
+        self._layout_meshes = -1  # MeshInfo offsets change
+
     def add_instance(self, mesh_id: int, world_from_object=None, material: int = -1) -> int:
         """Place a mesh; ``material`` >= 0 overrides its materials."""
         if not -1 <= material < len(self.materials):
@@ -276,7 +368,7 @@ class RenderScene:
     # -- device tables ---------------------------------------------------------------------
     def _build_layout(self) -> None:
         rt = self.rt
-        nv = sum(m["n_vertices"] for m in self.meshes)
+        nv = sum(m["n_vertices"] for m in self.meshes if not m.get("owned"))
         nt = sum(m["n_triangles"] for m in self.meshes)
         info = np.zeros(len(self.meshes), MESHINFO)
         pos = np.zeros((max(nv, 1), 4), np.float32)
@@ -286,8 +378,16 @@ class RenderScene:
         tmat = np.zeros(max(nt, 1), np.uint16)
         vo = to = 0
         for k, m in enumerate(self.meshes):
-            info[k] = (vo, to, m["material"], m["flags"])
             n, t = m["n_vertices"], m["n_triangles"]
+            if m.get("owned"):  # vertices in the dynamic arrays; triangles here as any mesh's
+                info[k] = (m["dyn_offset"], to, m["material"], m["flags"])
+                tris[to:to + t] = m["triangles"]
+                if m["tri_materials"] is not None:
+                    tmat[to:to + t] = m["tri_materials"]
+                m["vert_offset"], m["tri_offset"] = m["dyn_offset"], to
+                to += t
+                continue
+            info[k] = (vo, to, m["material"], m["flags"])
             if m["vertices"] is not None:
                 pos[vo:vo + n, :3] = m["vertices"]
             if m["normals"] is not None:
@@ -316,7 +416,7 @@ class RenderScene:
     def _copy_dynamic(self) -> None:
         rt = self.rt
         for m in self.meshes:
-            if m["vbuf"] is None:
+            if m["vbuf"] is None or m.get("owned"):  # owned: written in place, never copied
                 continue
             n = 16 * m["n_vertices"]
             rt.record("render.geometry", cl.enqueue_copy(
@@ -375,7 +475,8 @@ class RenderScene:
                 "g_pos": self.positions, "g_nrm": self.normals, "g_uv": self.uvs,
                 "g_tri": self.triangles,
                 "g_tri_mat": self.tri_materials, "g_mat": self.material_buf,
-                "g_tex": self.texinfo_buf, "g_texels": self.texel_buf}
+                "g_tex": self.texinfo_buf, "g_texels": self.texel_buf,
+                "g_dpos": self.dyn_positions, "g_dnrm": self.dyn_normals}
 
     def tables(self) -> dict:
         """Host copies for the float64 reference (dynamic meshes are read back: test use only)."""

@@ -114,6 +114,7 @@ GATHER_PARAMS = np.dtype([("scatter", np.uint32), ("q0", np.uint32), ("n_q", np.
 MESH_HAS_NORMALS = 1
 MESH_HAS_UVS = 2
 MESH_TRI_MATERIALS = 4
+MESH_DYNAMIC = 8
 
 #: (header, struct name, dtype) for every device struct of the renderer.
 STRUCTS = [

@@ -148,6 +148,17 @@ class Scene:
         self.meshes.append(MeshRecord(vbuf, tbuf, nv, nt, bool(dynamic), prim_base))
         return len(self.meshes) - 1
 
+    def replace_vertex_buffer(self, mesh_id: int, vertices_buf: cl.Buffer) -> None:
+        """Point a mesh given as device buffers at another vertex buffer of the same size (its
+        writer moved); the BLASes are rebound and rebuilt at the next :meth:`update`."""
+        rec = self.mesh_record(mesh_id)
+        if vertices_buf.size < 16 * rec.n_vertices:
+            raise ValueError(f"mesh {mesh_id}: vertex buffer holds {vertices_buf.size} bytes, "
+                             f"{rec.n_vertices} float4 vertices need {16 * rec.n_vertices}")
+        if vertices_buf is not rec.vertices_buf:
+            rec.vertices_buf = vertices_buf
+            self._storage_tris = -1  # new Blas objects bound to the new buffer
+
     def add_instance(self, mesh_id: int, world_from_object=None) -> int:
         """Place mesh ``mesh_id`` with an affine 4x4 ``world_from_object`` (identity if None).
 
