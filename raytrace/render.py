@@ -5,7 +5,7 @@ the device-side ray count decides who works). For each chunk of pixels (the whol
 the ray buffers would not fit in device memory):
 
     render.raygen      primary rays, 8x8 tiles in Morton order, spp per pixel, weight 1/spp
-    per depth 0..levels (levels: bounces, or as many as the last frame needed):
+    per depth 0..bounces (every level, every frame: a frame never depends on the last one):
       render.trace     closest hit (render.trace_secondary for depth >= 1)
       render.shade     ambient, sky on a miss, Beer-Lambert, child counts, primary AOVs
       render.shadow    shadow rays and Phong direct light per light
@@ -15,13 +15,15 @@ the ray buffers would not fit in device memory):
                        radiance (rays stay sorted by pixel); after the last level, tonemap + sRGB
 
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
-the shading). Every kernel object belongs to this renderer (one per depth
-level) and its arguments are bound when the scene's buffers change, so a frame is mostly bare
-enqueues from Python. Per-ray kernels loop with a grid stride over the device-side count and
-are launched for about the last frame's count rather than every slot.
+the shading). Every kernel (``kernels.launch.Kernel``) belongs to this renderer (one per depth
+level) and its arguments are bound by name when the scene's buffers change; per-launch values
+are the by-value RaygenParams/GatherParams records, so a frame is mostly bare enqueues from
+Python. Per-ray kernels loop with a grid stride over the device-side count and are launched for
+about the last arrived count (``size_hints``) rather than every slot: any size gives the same
+image.
 
-Only the RGBA8 image is read back (:meth:`Renderer.read_rgba`); ray counts stay on the device
-and are read on request (:meth:`Renderer.read_stats`, used by the benchmark).
+Reads: :meth:`Renderer.enqueue_read_rgba` / :meth:`Renderer.enqueue_read_stats` copy into pinned
+host memory without a wait (``kernels.pinned``); ``read_*`` synchronise (tests, tools).
 """
 
 from __future__ import annotations
@@ -179,7 +181,7 @@ class Renderer:
         self.block_sums = rt.buffer(4 * -(-cap // SCAN_BLOCK))
         self.counts = rt.buffer(4 * (MAX_DEPTH + 2))
         self.stats = rt.buffer(4 * STATS_LEN)
-        self._stats_reads = PinnedRing(rt, 4 * STATS_LEN, np.uint32, (STATS_LEN,), slots=3)
+        self._stats_reads = PinnedRing(rt, 4 * STATS_LEN, np.uint32, (STATS_LEN,), slots=4)
         self._rgba_reads = PinnedRing(rt, 4 * self.n_pixels, np.uint8, (s.height, s.width, 4))
         self._stats_handle: ReadHandle | None = None  # the last frame's counts (size hints)
         self._levels = s.bounces
