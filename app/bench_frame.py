@@ -2,9 +2,9 @@
 BLAS refit or rebuild, TLAS, wavefront render, RGBA8 read-back) on a scene with its water grid
 resized, per stage from OpenCL events and as wall time per frame (FPS), warm-up excluded.
 
-DESIGN.md's goal: a 1024^2 grid with a boat at 1920x1080, shadows, reflection and refraction,
->= 60 FPS on an H100. Every timed frame is checked: its image is finite and the water's guard
-reports no NaN, else the run fails.
+The goal (BENCHMARKS.md): a 1024^2 grid with a boat at 1920x1080, shadows, reflection and
+refraction, >= 60 FPS on an H100. Every timed frame is checked: its image is finite and the
+water's guard reports no NaN, else the run fails.
 """
 
 from __future__ import annotations

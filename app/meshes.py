@@ -8,8 +8,13 @@ edited file is re-read. Machines without pyvista (the GPU box) load the committe
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import logging
 import os
+import sys
+import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -58,23 +63,81 @@ def _write_cache(path: Path, digest: str, vertices: np.ndarray, triangles: np.nd
             continue
 
 
+class _Collect(logging.Handler):
+    def __init__(self):
+        super().__init__()
+        self.messages: list[str] = []
+
+    def emit(self, record):
+        self.messages.append(record.getMessage())
+
+
+@contextlib.contextmanager
+def quiet_vtk():
+    """Silence VTK around a read and collect what it said: yields a list that receives its
+    messages (VTK's output window goes to Python's logging through pyvista, its warnings to
+    ``warnings``, and anything written straight to file descriptor 2 is captured too)."""
+    messages: list[str] = []
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
+    collect = _Collect()
+    root.handlers[:] = [collect]
+    sys.stderr.flush()
+    saved_fd = os.dup(2)
+    with tempfile.TemporaryFile() as err, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        os.dup2(err.fileno(), 2)
+        try:
+            yield messages
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved_fd, 2)
+            os.close(saved_fd)
+            root.handlers[:] = handlers
+            root.setLevel(level)
+            err.seek(0)
+            raw = err.read().decode("utf-8", "replace").splitlines()
+            messages += collect.messages + [str(w.message) for w in caught] + raw
+
+
+def _vtk_problem(messages: list[str]) -> str:
+    """The first thing VTK said, on one line (its messages carry multi-line object dumps)."""
+    for m in messages:
+        line = m.strip().splitlines()[0].strip() if m.strip() else ""
+        if line:
+            return line[:200]
+    return ""
+
+
 def _read_with_pyvista(path: Path) -> tuple[np.ndarray, np.ndarray]:
     try:
         import pyvista as pv
     except ImportError:
         raise InputError(f"{path}: reading meshes needs pyvista (pip install pyvista), and no "
                          "up-to-date .npz cache was found beside it") from None
-    try:
-        data = pv.read(str(path))
-    except Exception as exc:  # vtk raises many kinds; the user needs one line
-        raise InputError(f"{path}: unreadable mesh ({type(exc).__name__}: {exc})") from None
+    with quiet_vtk() as said:
+        try:
+            data = pv.read(str(path))
+            error = None
+        except Exception as exc:  # vtk raises many kinds; the user needs one line
+            data, error = None, f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}" \
+                if str(exc).strip() else type(exc).__name__
+    problem = _vtk_problem(said)
+    if data is None:
+        raise InputError(f"{path}: unreadable mesh ({problem or error})")
     if not isinstance(data, pv.PolyData):
         data = data.extract_surface()
     if data.n_cells == 0:
-        raise InputError(f"{path}: no triangles in the file")
+        raise InputError(f"{path}: no triangles in the file" + (f" ({problem})" if problem else ""))
     # clean() merges coincident points; triangles that collapse become lines or points and are
     # moved out of `faces`, so what is left in `faces` is a valid triangle list.
-    mesh = data.triangulate().clean()
+    with quiet_vtk() as said:
+        try:
+            mesh = data.triangulate().clean()
+        except Exception as exc:  # noqa: BLE001 (vtk raises many kinds)
+            mesh, error = None, type(exc).__name__
+    if mesh is None:
+        raise InputError(f"{path}: cannot triangulate the mesh ({_vtk_problem(said) or error})")
     faces = np.asarray(mesh.faces)
     if faces.size == 0:
         raise InputError(f"{path}: no triangles in the file (after merging coincident points)")
@@ -121,9 +184,9 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 
 
 def height_field_grid(n: int, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """The BVH benchmark's water-like height field, exactly as NVIDIA Warp's anchor script
-    (``../shared/bench/warp_anchor.py`` grid()): n x n vertices over [-1,1]^2, 2 (n-1)^2
-    triangles; ``t`` shifts the waves (a deformed grid of the same topology)."""
+    """The BVH benchmark's water-like height field, exactly as NVIDIA Warp's anchor script's
+    grid() (``app.bench_bvh``): n x n vertices over [-1,1]^2, 2 (n-1)^2 triangles; ``t`` shifts
+    the waves (a deformed grid of the same topology)."""
     x = np.linspace(-1, 1, n, dtype=np.float32)
     X, Z = np.meshgrid(x, x)
     Y = 0.03 * np.sin(9 * X + t) * np.cos(7 * Z) + 0.01 * np.sin(31 * (X + Z))
@@ -189,7 +252,8 @@ def load_mesh_groups(path: Path, n_tris: int):
     except ImportError:
         raise InputError(f"{path}: material groups need pyvista or an up-to-date cache "
                          f"{cache}") from None
-    mesh = pv.read(str(path)).triangulate().clean()
+    with quiet_vtk():
+        mesh = pv.read(str(path)).triangulate().clean()
     if "MaterialIds" not in mesh.cell_data or mesh.n_cells != n_tris:
         return None
     ids = np.asarray(mesh.cell_data["MaterialIds"], np.int32)
