@@ -42,9 +42,8 @@ def test_no_platform_is_one_line(monkeypatch):
 def test_fence_the_compiler_saw_is_the_one_promised(rt):
     kind = fence_kind(rt.device)
     out = rt.buffer(12)
-    k = rt.kernel("device_probe.cl", "device_probe")
-    k.set_args(out)
-    rt.launch("test.probe", k, 1)
+    rt.kernel_launcher("device_probe.cl", "device_probe", stage="test.probe").bind(
+        out=out).launch(1)
     version, atomic_fence, membar = rt.to_host(out, np.int32, 3)
     assert atomic_fence == (kind == "atomic_fence")
     assert membar == (kind == "membar")
