@@ -87,7 +87,7 @@ typedef struct {
     float pad0;
 } LbmParams;
 
-/* 96 bytes: the guard's device-side record (one per solver). The step kernels count and
+/* 112 bytes: the guard's device-side record (one per solver). The step kernels count and
  * account what the limiter did; the reduction fills the statistics and decides the action; the
  * host reads the whole record once per frame. Counters and volumes are cumulative; volumes are
  * sums of depth over cells in m (x dx^2 = m^3). */
@@ -106,7 +106,9 @@ typedef struct {
     float sources;         /* depth asked for by drops (sum over cells), m */
     float clipped;         /* depth removed by the limiter (and by restores), m */
     float created;         /* depth added by the limiter (and by restores), m */
-    float peak_fr2;        /* largest Froude^2 seen before limiting since the host reset it */
+    float peak_fr2;        /* largest Froude^2 the limiter saw before clipping, over the run of
+                              intervals with clips that ended at the last check (0 if clean) */
+    float peak_acc;        /* the same, accumulated by the steps since the last check */
     uint nan_cells;        /* non-finite cells found at the last check (before any restore) */
     uint action;           /* LBM_GUARD_*: what lbm_guard_apply does next */
     uint clamped;          /* cells clamped by the limiter or a source */
@@ -116,6 +118,7 @@ typedef struct {
     uint saved;            /* checkpoints saved */
     uint checks;           /* checks run */
     uint damped_cells;     /* cells with a damping mark at the last check */
+    uint pad0, pad1;
 } LbmGuard;
 
 /* 32 bytes: one work-group's partial reduction. */

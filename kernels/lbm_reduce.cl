@@ -107,8 +107,12 @@ void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
     g->nan_cells = acc.nan_cells;
     g->damped_cells = acc.damped_cells;
     if (acc.damped_cells > 0u) g->damped += 1u;
-    const int clean = acc.nan_cells == 0u && g->clamped == g->clamped_checked;
+    const int clipped = g->clamped != g->clamped_checked;
+    const int clean = acc.nan_cells == 0u && !clipped;
     g->clamped_checked = g->clamped;
+    /* the limiter's peak Froude^2 over the current run of intervals with clips */
+    g->peak_fr2 = clipped ? fmax(g->peak_fr2, g->peak_acc) : 0.0f;
+    g->peak_acc = 0.0f;
 #if LBM_GUARD
     if (acc.nan_cells > 0u) {
         g->action = LBM_GUARD_RESTORE;

@@ -172,7 +172,7 @@ __kernel void lbm_step(__global const LBM_FT* restrict f_src, __global LBM_FT* r
     if (clamped) {
         atomic_inc(&guard->clamped);
         lbm_account(guard, dh);
-        if (fr2 > 0.0f) atomic_max((volatile __global uint*)&guard->peak_fr2, as_uint(fr2));
+        if (fr2 > 0.0f) atomic_max((volatile __global uint*)&guard->peak_acc, as_uint(fr2));
     }
     mark_dst[n] = (uchar)(clamped ? LBM_DAMP_STEPS : lbm_mark_spread(mark_src, p, i, j, own));
 #endif

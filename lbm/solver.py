@@ -628,13 +628,31 @@ class ShallowWater:
         """
         g = self.guard_record()
         prev, self._reported = self._reported, np.array([g], GUARD_DTYPE)
-        delta = {k: int(g[k]) - int(prev[0][k]) for k in ("clamped", "restored", "damped",
-                                                          "saved")}
-        # the limiter's peak Froude^2 is kept until read here; reset it for the next call
-        cl.enqueue_fill_buffer(self.rt.queue, self._guard, np.float32(0.0),
-                               GUARD_DTYPE.fields["peak_fr2"][1], 4)
+        out = self.guard_summary(g, prev[0])
+        note = self._maybe_rechoose(out)
+        if note:
+            out["lattice"] = note
+            out["report"] = note if out["report"] == "ok" else out["report"] + "; " + note
+        return out
+
+    @property
+    def guard_buffer(self) -> cl.Buffer:
+        """The device guard record (``GUARD_DTYPE``), current as of the last check: a frame
+        loop copies it without blocking and reads it with :meth:`guard_summary`."""
+        if self._dirty:
+            self._check(SaveRequest.NO)
+        return self._guard
+
+    def guard_summary(self, g: np.void, prev: np.void) -> dict:
+        """:meth:`stats`'s dict for guard record ``g``, counts taken since record ``prev``
+        (``lattice`` is always None here: only :meth:`stats` re-chooses the lattice)."""
+        delta = {k: int(g[k]) - int(prev[k]) for k in ("clamped", "restored", "damped",
+                                                        "saved")}
         a = self.dx**2
-        fr2 = max(float(g["max_fr2"]), float(g["peak_fr2"]), 0.0)
+        # the Froude number the limiter saw before clipping, in the run of acting intervals
+        # that ended with the last check (lbm_reduce_final)
+        peak = float(g["peak_fr2"]) if delta["clamped"] else 0.0
+        fr2 = max(float(g["max_fr2"]), peak, 0.0)
         nan = delta["restored"] > 0 if self.guard else int(g["nan_cells"]) > 0
         out = {
             "time": self.time,
@@ -668,10 +686,6 @@ class ShallowWater:
                          f"{out['max_froude']:.3g}), damped them locally; volume clipped "
                          f"{out['volume_clipped']:.3g} m^3, created {out['volume_created']:.3g}"
                          " m^3 so far")
-        note = self._maybe_rechoose(out)
-        if note:
-            out["lattice"] = note
-            parts.append(note)
         out["report"] = "; ".join(parts) if parts else "ok"
         return out
 

@@ -12,16 +12,16 @@ PARAMS_DTYPE = np.dtype([
     ("rest0", "<f4"), ("rest_axis", "<f4"), ("rest_diag", "<f4"), ("pad0", "<f4"),
 ])
 
-#: LbmGuard, 96 bytes: the guard's device record, read by the host once per frame.
+#: LbmGuard, 112 bytes: the guard's device record, read by the host once per frame.
 GUARD_DTYPE = np.dtype([
     ("tau", "<f4"), ("tau_user", "<f4"),
     ("mass", "<f4"), ("max_u2", "<f4"), ("max_fr2", "<f4"), ("min_h", "<f4"),
     ("ckpt_mass", "<f4"), ("ckpt_max_u2", "<f4"), ("ckpt_max_fr2", "<f4"), ("ckpt_min_h", "<f4"),
     ("mass0", "<f4"), ("sources", "<f4"), ("clipped", "<f4"), ("created", "<f4"),
-    ("peak_fr2", "<f4"),
+    ("peak_fr2", "<f4"), ("peak_acc", "<f4"),
     ("nan_cells", "<u4"), ("action", "<u4"), ("clamped", "<u4"), ("clamped_checked", "<u4"),
     ("restored", "<u4"), ("damped", "<u4"), ("saved", "<u4"), ("checks", "<u4"),
-    ("damped_cells", "<u4"),
+    ("damped_cells", "<u4"), ("pad0", "<u4"), ("pad1", "<u4"),
 ])
 
 #: LbmPartial, 32 bytes: one work-group's partial reduction.
