@@ -162,15 +162,15 @@ class ShallowWater:
         self._field_bufs = None  # h, u, v for fields(), on first call
 
         # -- kernels, looked up once --------------------------------------------------------
-        self._k_steps: dict[bool, tuple[cl.Kernel, cl.Kernel]] = {}
-        self._k_drop = self._kernel("lbm_sources.cl", "lbm_drop")
-        self._k_push = self._kernel("lbm_sources.cl", "lbm_push")
-        self._k_partial = self._kernel("lbm_reduce.cl", "lbm_reduce_partial")
-        self._k_final = self._kernel("lbm_reduce.cl", "lbm_reduce_final")
-        self._k_apply = self._kernel("lbm_guard.cl", "lbm_guard_apply")
-        self._k_height = self._kernel("lbm_surface.cl", "lbm_surface_height")
-        self._k_mesh = self._kernel("lbm_surface.cl", "lbm_surface_mesh")
-        self._k_fields = self._kernel("lbm_fields.cl", "lbm_fields")
+        self._k_steps: dict[bool, tuple] = {}
+        self._k_drop = self._kernel("lbm_sources.cl", "lbm_drop", "lbm.sources")
+        self._k_push = self._kernel("lbm_sources.cl", "lbm_push", "lbm.sources")
+        self._k_partial = self._kernel("lbm_reduce.cl", "lbm_reduce_partial", "lbm.guard")
+        self._k_final = self._kernel("lbm_reduce.cl", "lbm_reduce_final", "lbm.guard")
+        self._k_apply = self._kernel("lbm_guard.cl", "lbm_guard_apply", "lbm.guard")
+        self._k_height = self._kernel("lbm_surface.cl", "lbm_surface_height", "lbm.surface")
+        self._k_mesh = self._kernel("lbm_surface.cl", "lbm_surface_mesh", "lbm.surface")
+        self._k_fields = self._kernel("lbm_fields.cl", "lbm_fields", "lbm.fields")
 
         self._guard_host = np.zeros(1, GUARD_DTYPE)
         self._guard_evt: cl.Event | None = None
@@ -183,16 +183,18 @@ class ShallowWater:
         self.set_state(np.full((self.ny, self.nx), d))
 
     # -- construction helpers ---------------------------------------------------------------
-    def _kernel(self, source: str, name: str, defines: dict | None = None) -> cl.Kernel:
-        return cl.Kernel(self.rt.program(source, {**self._defines, **(defines or {})}), name)
+    def _kernel(self, source: str, name: str, stage: str, defines: dict | None = None):
+        """A :class:`kernels.launch.Kernel` (arguments bound by name, timed as ``stage``)."""
+        return self.rt.kernel_launcher(source, name, stage=stage,
+                                       defines={**self._defines, **(defines or {})})
 
-    def _step_kernels(self, uneven: bool) -> tuple[cl.Kernel, cl.Kernel]:
+    def _step_kernels(self, uneven: bool) -> tuple:
         """The fused step for the current walls and bed kind, bound for both parities."""
         pair = self._k_steps.get(uneven)
         if pair is None:
             defines = {"LBM_BOUNDARY": int(self.boundary), "LBM_BED": int(uneven)}
-            pair = (self._kernel("lbm_step.cl", "lbm_step", defines),
-                    self._kernel("lbm_step.cl", "lbm_step", defines))
+            pair = (self._kernel("lbm_step.cl", "lbm_step", "lbm.step", defines),
+                    self._kernel("lbm_step.cl", "lbm_step", "lbm.step", defines))
             self._k_steps[uneven] = pair
         return pair
 
@@ -203,7 +205,8 @@ class ShallowWater:
         for k, (fs, fd, hs, hd, ms, md) in (
                 (a, (f.current, f.other, h.current, h.other, m.current, m.other)),
                 (b, (f.other, f.current, h.other, h.current, m.other, m.current))):
-            k.set_args(fs, fd, hs, hd, self._zforce, ms, md, self._params, self._guard)
+            k.bind(f_src=fs, f_dst=fd, h_src=hs, h_dst=hd, bed=self._zforce, mark_src=ms,
+                   mark_dst=md, p=self._params, guard=self._guard)
         self._k_step_pair = (a, b)
 
     # -- public properties ------------------------------------------------------------------
@@ -337,7 +340,7 @@ class ShallowWater:
 
     def _enqueue_step(self) -> cl.Event:
         k = self._k_step_pair[self._parity]
-        evt = self.rt.launch("lbm.step", k, (self.nx, self.ny), self._local_size())
+        evt = k.launch((self.nx, self.ny), self._local_size())
         self._f.swap()
         self._h.swap()
         self._mark.swap()
@@ -389,15 +392,15 @@ class ShallowWater:
         """Guard check, all on the device: reduce, decide (restore / save / nothing), apply;
         then start a non-blocking read of the 80-byte guard record."""
         rt, p = self.rt, self._params
-        self._k_partial.set_args(self._f.current, self._mark.current, p, self._partials)
-        rt.launch("lbm.guard", self._k_partial, self._n_partials * 256, 256)
-        self._k_final.set_args(self._partials, np.int32(self._n_partials), self._guard,
-                               np.int32(save))
-        rt.launch("lbm.guard", self._k_final, 256, 256)
+        self._k_partial.bind(f=self._f.current, mark=self._mark.current, p=p,
+                             partials=self._partials).launch(self._n_partials * 256, 256)
+        self._k_final.bind(partials=self._partials, n_partials=self._n_partials, g=self._guard,
+                           save=int(save)).launch(256, 256)
         if self.guard:
-            self._k_apply.set_args(self._f.current, self._h.current, self._f_ckpt, self._h_ckpt,
-                                   self._mark.current, p, self._guard)
-            rt.launch("lbm.guard", self._k_apply, self.n_cells, 256 if rt.is_gpu else None)
+            self._k_apply.bind(f=self._f.current, h_buf=self._h.current, f_ckpt=self._f_ckpt,
+                               h_ckpt=self._h_ckpt, mark=self._mark.current, p=p,
+                               guard=self._guard).launch(self.n_cells,
+                                                         256 if rt.is_gpu else None)
         self._guard_evt = cl.enqueue_copy(rt.queue, self._guard_host, self._guard,
                                           is_blocking=False)
         self._since_check = 0
@@ -414,12 +417,11 @@ class ShallowWater:
             return None
         return i0, j0, i1 - i0 + 1, j1 - j0 + 1
 
-    def _launch_source(self, stage: str, kernel: cl.Kernel, box, volume=0.0, **fields) -> None:
+    def _launch_source(self, kernel, box, volume=0.0, **fields) -> None:
         i0, j0, w, h = box
         src = record(SOURCE_DTYPE, i0=i0, j0=j0, volume=volume, **fields)
-        kernel.set_args(self._f.current, self._h.current, self._mark.current, self._params, src,
-                        self._guard)
-        self.rt.launch(stage, kernel, (w, h))
+        kernel.bind(f=self._f.current, h_buf=self._h.current, mark=self._mark.current,
+                    p=self._params, s=src, guard=self._guard).launch((w, h))
         self._dirty = True
 
     def _check_radius(self, what: str, radius) -> float:
@@ -463,7 +465,7 @@ class ShallowWater:
                              f"({self._depth_chosen:g} m deep); dry cells are not supported")
         box = self._box(x - r, x + r, y - r, y + r)
         if box is not None:
-            self._launch_source("lbm.sources", self._k_drop, box, x=x, y=y, dx=0.0, dy=0.0,
+            self._launch_source(self._k_drop, box, x=x, y=y, dx=0.0, dy=0.0,
                                 radius=r, amount=amount,
                                 volume=self._drop_volume(box, x, y, r, amount))
 
@@ -490,7 +492,7 @@ class ShallowWater:
         box = self._box(min(x, x + ddx) - r, max(x, x + ddx) + r,
                         min(y, y + ddy) - r, max(y, y + ddy) + r)
         if box is not None:
-            self._launch_source("lbm.sources", self._k_push, box, x=x, y=y, dx=ddx, dy=ddy,
+            self._launch_source(self._k_push, box, x=x, y=y, dx=ddx, dy=ddy,
                                 radius=r, amount=s)
 
     def set_rain(self, rate: float, radius: float, height: float, seed: int = 0) -> None:
@@ -549,14 +551,13 @@ class ShallowWater:
         if self._eta is None:
             self._eta = self.rt.buffer(4 * self.n_cells)
         rt = self.rt
-        self._k_height.set_args(self._f.current, self._bed, self._params, self._eta)
-        rt.launch("lbm.surface", self._k_height, self.n_cells, 256 if rt.is_gpu else None)
-        origin4 = np.array([o[0], o[1], o[2], 0.0], np.float32).view(cl.cltypes.float4)[0]
-        self._k_mesh.set_args(self._eta, self._params, origin4, vertices_buf,
-                              normals_buf if normals_buf is not None else vertices_buf,
-                              np.int32(normals_buf is not None))
-        return rt.launch("lbm.surface", self._k_mesh, (self.nx, self.ny),
-                         (64, 1) if rt.is_gpu else None)
+        self._k_height.bind(f=self._f.current, bed=self._bed, p=self._params, eta=self._eta)
+        self._k_height.launch(self.n_cells, 256 if rt.is_gpu else None)
+        origin4 = np.array([o[0], o[1], o[2], 0.0], np.float32)
+        self._k_mesh.bind(eta=self._eta, p=self._params, origin=origin4, vertices=vertices_buf,
+                          normals=normals_buf if normals_buf is not None else vertices_buf,
+                          write_normals=int(normals_buf is not None))
+        return self._k_mesh.launch((self.nx, self.ny), (64, 1) if rt.is_gpu else None)
 
     def fields(self) -> dict[str, np.ndarray]:
         """Depth ``h`` (m), velocity ``u``, ``v`` (m/s) and ``bed`` (m) as float32 (ny, nx)
@@ -566,8 +567,8 @@ class ShallowWater:
         if self._field_bufs is None:
             self._field_bufs = [self.rt.buffer(4 * self.n_cells) for _ in range(3)]
         hb, ub, vb = self._field_bufs
-        self._k_fields.set_args(self._f.current, self._params, hb, ub, vb)
-        self.rt.launch("lbm.fields", self._k_fields, self.n_cells, 256 if self.rt.is_gpu else None)
+        self._k_fields.bind(f=self._f.current, p=self._params, h_out=hb, u_out=ub, v_out=vb)
+        self._k_fields.launch(self.n_cells, 256 if self.rt.is_gpu else None)
         shape = (self.ny, self.nx)
         out = {name: self.rt.to_host(b, np.float32, self.n_cells).reshape(shape)
                for name, b in (("h", hb), ("u", ub), ("v", vb))}
