@@ -209,6 +209,38 @@ class ShallowWater:
                    mark_dst=md, p=self._params, guard=self._guard)
         self._k_step_pair = (a, b)
 
+    def pressure_head_buffer(self) -> cl.Buffer:
+        """The device buffer (nx*ny float32, m) that the step's bed force reads as the bed: the
+        bed plus a surface pressure head that floating bodies write (:mod:`lbm.bodies`). Made
+        on the first call as a copy of the bed; from then on the step is the uneven-bed kernel.
+        The force is antisymmetric per link, so a pressure head moves water but never adds or
+        removes any."""
+        if self._zforce is self._bed:
+            self._zforce = self.rt.buffer(4 * self.n_cells)
+            cl.enqueue_copy(self.rt.queue, self._zforce, self._bed)
+            self._bind_steps()
+        return self._zforce
+
+    @property
+    def bed_buffer(self) -> cl.Buffer:
+        """The bed (nx*ny float32, m) on the device."""
+        return self._bed
+
+    @property
+    def params(self) -> np.void:
+        """The by-value ``LbmParams`` record every lbm kernel takes (kernels/lbm.h)."""
+        return self._params
+
+    @property
+    def populations_buffer(self) -> cl.Buffer:
+        """The current populations (storage as :attr:`storage`; read-only for other stages)."""
+        return self._f.current
+
+    @property
+    def defines(self) -> dict:
+        """Build defines of this solver's kernels (storage, guard)."""
+        return dict(self._defines)
+
     # -- public properties ------------------------------------------------------------------
     @property
     def dt(self) -> float:
