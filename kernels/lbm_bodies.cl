@@ -147,7 +147,9 @@ void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* re
     /* -- integrate (semi-implicit Euler, added mass) ---------------------------------------- */
     const float3 Fh = (float3)(l_acc[0][0], l_acc[1][0], l_acc[2][0]);
     const float3 Th = (float3)(l_acc[3][0], l_acc[4][0], l_acc[5][0]);
-    const float m = body.pos.w, added = 1.0f + body.inertia.w, dt = s.dt;
+    /* added mass in proportion to the part of the rest displacement under water (none in air) */
+    const float m = body.pos.w, dt = s.dt;
+    const float added = 1.0f + body.inertia.w * fmin(1.0f, l_acc[6][0] * s.rho / m);
     float3 v2 = vel + dt * (Fh / (m * added) - (float3)(0.0f, s.gravity / added, 0.0f));
     const float3 I = body.inertia.xyz;
     float3 wb = lbm_rot_t(r0, r1, r2, omega);
@@ -165,13 +167,16 @@ void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* re
     if (p2.x > hi_x) { p2.x = hi_x; v2.x = fmin(v2.x, 0.0f); }
     if (p2.z < lo_z) { p2.z = lo_z; v2.z = fmax(v2.z, 0.0f); }
     if (p2.z > hi_z) { p2.z = hi_z; v2.z = fmin(v2.z, 0.0f); }
+    /* the bed: the hull's lowest point stays above the lowest bed (a grounded boat) */
+    const float floor_y = s.origin.y + s.floor + body.vel.w;
+    if (p2.y < floor_y) { p2.y = floor_y; v2.y = fmax(v2.y, 0.0f); }
     if (lo_x > hi_x) p2.x = s.origin.x + 0.5f * s.size_x;
     if (lo_z > hi_z) p2.z = s.origin.z + 0.5f * s.size_z;
     const int finite = all(isfinite(p2)) && all(isfinite(v2)) && all(isfinite(w2))
                        && all(isfinite(q2));
     if (finite) {
         body.pos.xyz = p2;
-        body.vel.xyz = v2;
+        body.vel.xyz = v2;   /* vel.w: the keel depth, kept */
         body.omega.xyz = w2;
         body.quat = q2;
     } else {   /* keep the pose, stop the body: never a NaN in a transform */

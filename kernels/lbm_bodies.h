@@ -18,7 +18,8 @@
 typedef struct {
     float4 pos;      /* centre of mass in world coordinates, m; w: mass, kg */
     float4 quat;     /* world_from_body rotation as (w, x, y, z) in (x, y, z, w) */
-    float4 vel;      /* velocity of the centre of mass, m/s; w: unused */
+    float4 vel;      /* velocity of the centre of mass, m/s; w: depth of the hull's lowest
+                        point below the centre of mass at rest orientation, m (the floor) */
     float4 omega;    /* angular velocity in world coordinates, rad/s; w: unused */
     float4 inertia;  /* principal moments about the centre of mass (body x, y, z), kg m^2;
                         w: added mass as a fraction of the mass (and of the inertia) */
@@ -45,7 +46,8 @@ typedef struct {
     int n_bodies;
     float size_x;    /* extent of the water box along world x and z, m (walls) */
     float size_z;
-    int pad0, pad1;
+    float floor;     /* lowest bed height, m above origin.y: no hull goes below it */
+    int pad0;
 } LbmBodyStep;
 
 #endif

@@ -251,10 +251,10 @@ class BoatSpec:
     is world_from_mesh = world_from_placed . base, as for a static mesh. ``mass`` (kg) or
     ``density`` (kg/m^3 of the hull's volume); ``damping`` (heave, drift, rotation) in 1/s:
     heave and drift relax the hull's velocity towards the water's (per kg of displaced water),
-    rotation damps its spin. ``center_of_mass``: a point of the placed mesh (m) where the mass
-    is centred (ballast; the inertia is the uniform solid's moved there by the parallel-axis
-    rule); None: the centroid of the uniform solid, which floats upright only if the hull's
-    metacentre is above it."""
+    rotation damps its spin. ``mass_height``: height (m) of the centre of mass above the hull's
+    lowest point, above the solid's centroid (ballast; the inertia is the uniform solid's moved
+    there by the parallel-axis rule); None: the centroid of the uniform solid, which floats
+    upright only if the hull's metacentre is above it."""
 
     vertices: np.ndarray
     faces: np.ndarray
@@ -265,7 +265,7 @@ class BoatSpec:
     base: np.ndarray = field(default_factory=lambda: np.eye(4)[:3])
     damping: tuple = (2.0, 1.0, 2.0)
     added_mass: float = 0.5
-    center_of_mass: tuple | None = None
+    mass_height: float | None = None
     name: str = ""
 
 
@@ -286,12 +286,17 @@ class Boats:
     kernels/transform.h, 48 bytes); boat k writes row ``rows[k]`` (world_from_mesh) every step,
     with no host copy. ``origin``: world position of the water grid's corner (as
     ``sim.write_surface``'s origin), so the water surface is at ``origin.y + bed + h``.
-    ``rho``: water density (kg/m^3). Building one reads the water's depth once (a host copy) to
-    refuse boats that would touch the bed.
+    ``rho``: water density (kg/m^3). ``coupled``: True (default) steps the boats after every
+    water step of ``sim.step(n)`` (a hook), so the hulls' pressure follows the water step by
+    step (holding it over several water steps lags the water's reaction and pumps energy into a
+    bobbing hull: measured, docs/lbm.md); False: the caller calls :meth:`enqueue_step`.
+    Building one reads the water's depth once (a host copy) to refuse boats that would touch
+    the bed.
     """
 
     def __init__(self, sim, specs, transform_buffer: cl.Buffer, rows, *,
-                 origin=(0.0, 0.0, 0.0), rho: float = RHO_WATER, max_substep: float = 1 / 120):
+                 origin=(0.0, 0.0, 0.0), rho: float = RHO_WATER, max_substep: float = 1 / 120,
+                 coupled: bool = True):
         self.sim, self.rt = sim, sim.rt
         self.origin = _finite3("origin", origin)
         self.rho = float(rho)
@@ -314,12 +319,20 @@ class Boats:
         self._k_press = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_press",
                                                 stage="lbm.bodies", defines=defines)
         self._depth = None
+        self._floor = 0.0
         specs, rows = list(specs), list(rows)
         if len(specs) != len(rows):
             raise ValueError(f"{len(specs)} boats but {len(rows)} transform rows")
         for spec, row in zip(specs, rows, strict=True):
             self._add(spec, row)
         self._upload()
+        self.coupled = bool(coupled)
+        if self.coupled:
+            sim.add_step_hook(self.enqueue_step)
+
+    def close(self) -> None:
+        """Stop following the water (removes the step hook)."""
+        self.sim.remove_step_hook(self.enqueue_step)
 
     # -- building -----------------------------------------------------------------------------
     def _water(self) -> dict:
@@ -377,8 +390,14 @@ class Boats:
         k = free[0]
         c = hull.centroid
         inertia = hull.inertia_unit * (mass / hull.volume)
-        if spec.center_of_mass is not None:
-            cm = _finite3(f"{name}: center_of_mass", spec.center_of_mass)
+        if spec.mass_height is not None:
+            mh = float(spec.mass_height)
+            top = float(hull.footprint[..., 1][hull.footprint[..., 1] >= hull.footprint[
+                ..., 0]].max())
+            if not (math.isfinite(mh) and 0 <= mh <= top - hull.bottom):
+                raise ValueError(f"{name}: mass_height={spec.mass_height!r} m must lie within "
+                                 f"the hull's height [0, {top - hull.bottom:.4g}] m")
+            cm = c + np.array([0.0, hull.bottom + mh, 0.0])
             d = cm - c
             inertia = inertia + mass * (d @ d * np.eye(3) - np.outer(d, d))
             hull = _shift(hull, d)
@@ -387,10 +406,12 @@ class Boats:
         moments = np.diag(inertia)
         body_from_mesh = np.hstack([base[:, :3], (base[:, 3] - c)[:, None]])
         level = self.origin[1] + float(np.mean(water["h"].astype(np.float64) + water["bed"]))
+        self._floor = float(water["bed"].min())
         self._level0 = level
         rec = np.zeros(1, BODY_DTYPE)[0]
         rec["pos"] = (*com, mass)
         rec["quat"] = quat_from_matrix(R)
+        rec["vel"] = (0.0, 0.0, 0.0, -hull.bottom)
         rec["inertia"] = (*moments, spec.added_mass)
         rec["damping"] = (*damping, hull.radius)
         rec["torque"] = (0.0, 0.0, 0.0, level)
@@ -455,7 +476,7 @@ class Boats:
         lx, ly = self.sim.size
         return record(BODY_STEP_DTYPE, origin=(*self.origin, 0.0), dt=dt,
                       gravity=self.sim.lattice.gravity, rho=self.rho, n_bodies=self._n,
-                      size_x=lx, size_z=ly)
+                      size_x=lx, size_z=ly, floor=self._floor)
 
     def enqueue_step(self, dt: float) -> cl.Event | None:
         """Advance the boats by ``dt`` seconds against the water as it is now (substeps of at
@@ -511,5 +532,35 @@ class Boats:
         """Set boat ``index``'s velocity (m/s): a push or a tow (a host round trip)."""
         self._sync_host()
         k = self._slots[index]
-        self._host[k]["vel"][:3] = _finite3("velocity", velocity)
+        self._host[k]["vel"][:3] = _finite3("velocity", velocity)   # w: the keel depth
         cl.enqueue_copy(self.rt.queue, self._bodies, self._host)
+
+
+def hull_proxy(V, F, deck: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """A closed stand-in for a hull that is not a closed mesh (a game asset with open parts): the
+    solid between the mesh's lowest surface and the height ``deck``, as one closed box per
+    column of a ``spacing`` grid (coincident faces of neighbouring boxes cancel in every
+    integral; each box is closed, so :func:`check_closed` accepts the union). Returns (V, F)."""
+    V = np.asarray(V, np.float64)
+    lo, hi = V.min(0), V.max(0)
+    nx = max(1, int(math.ceil((hi[0] - lo[0]) / spacing)))
+    nz = max(1, int(math.ceil((hi[2] - lo[2]) / spacing)))
+    zz, xx = np.mgrid[0:nz, 0:nx]
+    xs = lo[0] + (xx.ravel() + 0.5) * spacing
+    zs = lo[2] + (zz.ravel() + 0.5) * spacing
+    bottom, _ = vertical_hits(V, np.asarray(F, np.int64), xs, zs)
+    keep = np.isfinite(bottom) & (bottom < deck)
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (0, 1) for z in (-0.5, 0.5)])
+    box_f = np.array([(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
+                      (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)])
+    verts, faces = [], []
+    for k, (x, z, b) in enumerate(zip(xs[keep], zs[keep], bottom[keep], strict=True)):
+        c = corners.copy()
+        c[:, 0] = x + c[:, 0] * spacing
+        c[:, 2] = z + c[:, 2] * spacing
+        c[:, 1] = np.where(c[:, 1] > 0, deck, b)
+        verts.append(c)
+        faces.append(box_f + 8 * k)
+    if not verts:
+        raise HullError(f"no part of the mesh lies below the deck height {deck:g}")
+    return np.concatenate(verts), np.concatenate(faces)

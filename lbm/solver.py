@@ -177,6 +177,7 @@ class ShallowWater:
         self._reported = np.zeros(1, GUARD_DTYPE)  # counters at the last stats() call
         self._rain: _Rain | None = None
         self._rain_seed = None
+        self._step_hooks: list = []   # called after every step of step(n): coupled bodies
         self.time = 0.0
         self.steps = 0
         d = self.options.depth
@@ -208,6 +209,17 @@ class ShallowWater:
             k.bind(f_src=fs, f_dst=fd, h_src=hs, h_dst=hd, bed=self._zforce, mark_src=ms,
                    mark_dst=md, p=self._params, guard=self._guard)
         self._k_step_pair = (a, b)
+
+    def add_step_hook(self, hook) -> None:
+        """Call ``hook(dt)`` after every step of :meth:`step` (it must only enqueue): how
+        floating bodies (:class:`lbm.bodies.Boats`) follow the water step by step."""
+        if not callable(hook):
+            raise ValueError("add_step_hook: hook must be callable")
+        self._step_hooks.append(hook)
+
+    def remove_step_hook(self, hook) -> None:
+        if hook in self._step_hooks:
+            self._step_hooks.remove(hook)
 
     def pressure_head_buffer(self) -> cl.Buffer:
         """The device buffer (nx*ny float32, m) that the step's bed force reads as the bed: the
@@ -404,6 +416,8 @@ class ShallowWater:
             if self._rain is not None:
                 self._rain_due(self.time + self.dt)
             self._enqueue_step()
+            for hook in self._step_hooks:
+                hook(self.dt)
             self.time += self.dt
             self.steps += 1
             self._since_check += 1

@@ -49,7 +49,7 @@ BODY_DTYPE = np.dtype([
 #: LbmBodyStep, 48 bytes: one bodies launch, by value.
 BODY_STEP_DTYPE = np.dtype([
     ("origin", *_F4), ("dt", "<f4"), ("gravity", "<f4"), ("rho", "<f4"), ("n_bodies", "<i4"),
-    ("size_x", "<f4"), ("size_z", "<f4"), ("pad0", "<i4"), ("pad1", "<i4"),
+    ("size_x", "<f4"), ("size_z", "<f4"), ("floor", "<f4"), ("pad0", "<i4"),
 ])
 
 #: (header, struct name, dtype) of every device struct the lbm package declares.
