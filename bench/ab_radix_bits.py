@@ -5,7 +5,8 @@ Warp's anchor grid, 301^2 vertices = 300^2 cells by default) differ only in the 
 their Morton-key sort. Each round times ``--builds`` full builds of one, then of the other (the
 order swaps every round, so a drift in host load hits both alike). Per build: wall ms from the
 first enqueue to ``queue.finish()``, and device ms (the sum of the build's OpenCL event times).
-Printed as JSON: the medians over all builds, the per-round medians, and whether the two trees are
+Printed as JSON: the medians over all builds (``--no-profiling``: a queue without profiling, so
+wall times only), the per-round medians, and whether the two trees are
 the same bit for bit (nodes, leaf triangles, header fields); exit status 1 when they are not.
 
     python bench/ab_radix_bits.py [--n 301] [--rounds 9] [--builds 20] [--device SPEC]
@@ -59,15 +60,17 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=9)
     ap.add_argument("--builds", type=int, default=20, help="timed builds per variant per round")
     ap.add_argument("--device", help="device spec (default: LBWATER_DEVICE or the default)")
+    ap.add_argument("--no-profiling", dest="profiling", action="store_false",
+                    help="a queue without profiling (no device times)")
     args = ap.parse_args(argv)
     if args.n < 2 or args.rounds < 1 or args.builds < 1:
         ap.error("--n must be >= 2, --rounds and --builds >= 1")
 
     from app.meshes import height_field_grid
-    from kernels import get_runtime
+    from kernels import Runtime, get_runtime
     from raytrace.bvh import vertices_to_float4
 
-    rt = get_runtime(args.device)
+    rt = get_runtime(args.device) if args.profiling else Runtime(args.device, profiling=False)
     vertices, triangles = height_field_grid(args.n)
     vbuf = rt.to_device(vertices_to_float4(vertices))
     tbuf = rt.to_device(triangles)
@@ -95,10 +98,11 @@ def main(argv=None) -> int:
         "command": " ".join(["python", "bench/ab_radix_bits.py", *(argv or sys.argv[1:])]),
         "device": rt.name, "date": datetime.date.today().isoformat(),
         "grid": args.n - 1, "tris": len(triangles), "rounds": args.rounds,
-        "builds": args.builds, "same_tree": bool(same),
+        "builds": args.builds, "profiling": args.profiling, "same_tree": bool(same),
         **{f"bits{b}_passes": -(-blases[b].key_bits // b) for b in BITS},
         **{f"bits{b}_wall_ms": round(statistics.median(walls[b]), 4) for b in BITS},
-        **{f"bits{b}_device_ms": round(statistics.median(devs[b]), 4) for b in BITS},
+        **{f"bits{b}_device_ms": round(statistics.median(devs[b]), 4) if args.profiling
+           else None for b in BITS},
         **{f"bits{b}_round_wall_ms": rounds[b] for b in BITS},
     }
     print(json.dumps(out, indent=1))
