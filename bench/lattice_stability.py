@@ -163,6 +163,12 @@ def main(argv=None) -> int:
     ap.add_argument("--device", help="device spec (default: LBWATER_DEVICE or the default)")
     ap.add_argument("--out", help="CSV path (one row per run)")
     args = ap.parse_args(argv)
+    if args.n < 3 or min(args.dx, args.depth, args.sigma, args.seconds) <= 0:
+        ap.error("--n must be >= 3 and --dx, --depth, --sigma, --seconds > 0")
+    if min(args.ratios, default=0) <= 0 or min(args.taus, default=0) <= 0.5:
+        ap.error("--ratios must be > 0 and --taus > 0.5 (both non-empty)")
+    if not 0 <= args.dip < 1 or not 0 <= args.noise < 1:
+        ap.error("--dip and --noise must lie in [0, 1)")
 
     from app.io import atomic_path
     from kernels import get_runtime
