@@ -17,6 +17,7 @@ COMMANDS = [
     ("render", "app.cmd_render", "render a scene file to a PNG (ray traced)"),
     ("simulate", "app.cmd_simulate", "run a scene's water (LBM) without rendering; save .npz"),
     ("bench", "app.bench", "benchmarks: lbm, bvh, render"),
+    ("capture", "app.capture", "render a scene and its [[timeline]] to an H.264 video or PNGs"),
     ("study", "app.studies", "speed against accuracy studies: CSV + chart of error vs time"),
 ]
 
