@@ -29,7 +29,7 @@ def _plt():
 
     plt.rcParams.update({
         "figure.dpi": 110, "savefig.dpi": 120, "font.size": 9, "axes.titlesize": 10,
-        "axes.grid": True, "grid.alpha": 0.3, "axes.spines.top": False,
+        "axes.grid": True, "grid.alpha": 0.3, "axes.axisbelow": True, "axes.spines.top": False,
         "axes.spines.right": False, "legend.fontsize": 8, "legend.frameon": False,
         "axes.prop_cycle": matplotlib.cycler(color=PALETTE),
     })
@@ -44,10 +44,15 @@ def figure(title: str, xlabel: str, ylabel: str, *, log: Sequence[str] = (),
     ax.set_title(title)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
-    if "x" in log:
-        ax.set_xscale("log")
-    if "y" in log:
-        ax.set_yscale("log")
+    from matplotlib.ticker import FuncFormatter
+
+    plain = FuncFormatter(lambda v, _: f"{v:g}")   # 20, 300, 0.01 rather than 2x10^1
+    for name in log:
+        axis = ax.xaxis if name == "x" else ax.yaxis
+        (ax.set_xscale if name == "x" else ax.set_yscale)("log")
+        axis.set_major_formatter(plain)
+        axis.set_minor_formatter(plain)
+        axis.set_tick_params(which="minor", labelsize=6)
     return fig, ax
 
 
@@ -82,6 +87,7 @@ def stacked_bars(ax, categories: Sequence[str], stacks: dict[str, Sequence[float
         ax.bar(xs, v, bottom=bottom, label=name, color=PALETTE[i % len(PALETTE)], width=0.6)
         bottom += v
     ax.set_xticks(xs, list(categories))
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
 
 
 def save(fig, path: str | os.PathLike, *, source: str | None = None) -> None:
@@ -91,7 +97,7 @@ def save(fig, path: str | os.PathLike, *, source: str | None = None) -> None:
 
     plt = _plt()
     ax = fig.axes[0] if fig.axes else None
-    if ax is not None and ax.get_legend_handles_labels()[0]:
+    if ax is not None and ax.get_legend() is None and ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best")
     if source:
         fig.text(0.99, 0.005, source, ha="right", va="bottom", fontsize=6, color="0.4")

@@ -18,6 +18,7 @@ COMMANDS = [
     ("simulate", "app.cmd_simulate", "run a scene's water (LBM) without rendering; save .npz"),
     ("bench", "app.bench", "benchmarks: lbm, bvh, render"),
     ("capture", "app.capture", "render a scene and its [[timeline]] to an H.264 video or PNGs"),
+    ("sweep", "app.sweep", "sweep grid size, image size, bounces, spp: FPS, stages; CSV + charts"),
     ("study", "app.studies", "speed against accuracy studies: CSV + chart of error vs time"),
 ]
 
