@@ -49,8 +49,9 @@ class Study:
 class Context:
     """What a study gets: the runtime, the size mode and a logger."""
 
-    def __init__(self, rt, quick: bool, out: Path, log):
+    def __init__(self, rt, quick: bool, out: Path, log, size: tuple[int, int] | None = None):
         self.rt, self.quick, self.out, self.log = rt, quick, out, log
+        self.size = size   # image size of the render studies (None: the mode's)
 
     @property
     def source(self) -> str:
@@ -215,7 +216,7 @@ def storage_options(rt) -> list[str]:
 def lbm_precision(ctx) -> list[dict]:
     storages = storage_options(ctx.rt)
     if storages == ["fp32"]:
-        ctx.log("lbm-precision: the solver has no storage='fp16s' option yet; fp32 only")
+        ctx.log("the solver has no storage='fp16s' option yet; fp32 only")
     n_stoker = 200 if ctx.quick else 800
     n_seiche = 32 if ctx.quick else 256
     n_square, steps = (64, 20) if ctx.quick else (1024, 200)
@@ -414,7 +415,7 @@ def _render(ctx, *, spp=1, bounces=8, shading=None, cells=None, seconds=0.4, tim
     water: the render studies' only contact with the World."""
     from app.frames import open_world
 
-    w, h = size or ((48, 27) if ctx.quick else (320, 180))
+    w, h = ctx.size or size or ((48, 27) if ctx.quick else (320, 180))
     world = open_world(study_scene(), ctx.rt, width=w, height=h, spp=spp, bounces=bounces,
                        cells=cells, shading=shading)
     img = world.frame(seconds).copy()
@@ -532,8 +533,8 @@ def grid_vs_pixels(ctx) -> list[dict]:
 
     from app.assemble import water_spec
 
-    cells = (16, 32, 64) if ctx.quick else (25, 50, 100, 200, 400, 800)
-    size = (64, 36) if ctx.quick else (640, 360)
+    cells = (16, 32, 64, 128) if ctx.quick else (25, 50, 100, 200, 400, 800)
+    size = ctx.size or ((64, 36) if ctx.quick else (640, 360))
     imgs = {}
     rows = []
     for n in cells:
@@ -592,7 +593,8 @@ STUDIES = {s.name: s for s in (
 )}
 
 
-def run_study(name: str, out: Path, rt, quick: bool, log=print) -> tuple[Path, Path]:
+def run_study(name: str, out: Path, rt, quick: bool, log=print,
+              size: tuple[int, int] | None = None) -> tuple[Path, Path]:
     """Run study ``name``; write ``out/name.csv`` and ``out/name.png``; return their paths."""
     from app.errors import InputError
     from app.io import write_csv
@@ -600,7 +602,7 @@ def run_study(name: str, out: Path, rt, quick: bool, log=print) -> tuple[Path, P
     if name not in STUDIES:
         raise InputError(f"unknown study {name!r}; valid: {', '.join(STUDIES)}, all")
     s = STUDIES[name]
-    ctx = Context(rt, quick, out, log)
+    ctx = Context(rt, quick, out, log, size)
     rows = s.run(ctx)
     csv_path, png_path = out / f"{name}.csv", out / f"{name}.png"
     write_csv(csv_path, [{**r, "device": rt.name, "date": time.strftime("%Y-%m-%d"),
@@ -615,7 +617,23 @@ def add_arguments(p) -> None:
     p.add_argument("-o", "--out", required=True, help="folder for NAME.csv and NAME.png")
     p.add_argument("--quick", action="store_true",
                    help="tiny sizes (seconds on a CPU; the tests' size)")
+    p.add_argument("--size", metavar="WxH", help="image size of the render studies (default "
+                   "320x180; 48x27 with --quick, 64x36 for grid-vs-pixels)")
     p.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
+
+
+def _size(text: str | None) -> tuple[int, int] | None:
+    from app.errors import InputError
+
+    if text is None:
+        return None
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InputError(f"--size {text!r}: give WxH, e.g. 320x180") from None
+    if not (8 <= w <= 8192 and 8 <= h <= 8192):
+        raise InputError(f"--size {text!r}: sides must lie in [8, 8192]")
+    return w, h
 
 
 def run(args) -> int:
@@ -625,6 +643,7 @@ def run(args) -> int:
     names = list(STUDIES) if args.name == "all" else [args.name]
     if args.name != "all" and args.name not in STUDIES:
         raise InputError(f"unknown study {args.name!r}; valid: {', '.join(STUDIES)}, all")
+    size = _size(args.size)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"-o {args.out!r} exists and is not a folder")
@@ -632,7 +651,8 @@ def run(args) -> int:
     for name in names:
         t0 = time.perf_counter()
         csv_path, png_path = run_study(name, out, rt, args.quick,
-                                       log=lambda m, n=name: print(f"{n}: {m}", flush=True))
+                                       log=lambda m, n=name: print(f"{n}: {m}", flush=True),
+                                       size=size)
         print(f"{name}: wrote {csv_path} and {png_path} in {time.perf_counter() - t0:.1f} s",
               file=sys.stderr)
     return 0
