@@ -44,15 +44,8 @@ def figure(title: str, xlabel: str, ylabel: str, *, log: Sequence[str] = (),
     ax.set_title(title)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
-    from matplotlib.ticker import FuncFormatter
-
-    plain = FuncFormatter(lambda v, _: f"{v:g}")   # 20, 300, 0.01 rather than 2x10^1
     for name in log:
-        axis = ax.xaxis if name == "x" else ax.yaxis
         (ax.set_xscale if name == "x" else ax.set_yscale)("log")
-        axis.set_major_formatter(plain)
-        axis.set_minor_formatter(plain)
-        axis.set_tick_params(which="minor", labelsize=6)
     return fig, ax
 
 
@@ -90,6 +83,28 @@ def stacked_bars(ax, categories: Sequence[str], stacks: dict[str, Sequence[float
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
 
 
+def _plain_log_labels(ax) -> None:
+    """Log axes labelled 20, 300, 0.01 rather than 2x10^1; minor ticks labelled (2 and 5 of each
+    decade) only when the axis spans at most two decades, so labels never crowd."""
+    import math
+
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+
+    for axis, lim in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
+        if axis.get_scale() != "log" or min(lim) <= 0:
+            continue
+        axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        if math.log10(max(lim) / min(lim)) > 2:
+            axis.set_minor_formatter(NullFormatter())
+            continue
+
+        def minor(v, _):
+            m = v / 10 ** math.floor(math.log10(v) + 1e-9)
+            return f"{v:g}" if round(m, 6) in (2.0, 5.0) else ""
+        axis.set_minor_formatter(FuncFormatter(minor))
+        axis.set_tick_params(which="minor", labelsize=7)
+
+
 def save(fig, path: str | os.PathLike, *, source: str | None = None) -> None:
     """Write ``fig`` as a PNG atomically (temporary file, then rename) and close it. ``source``
     is a small footnote (device, date, mode) so a chart never travels without its provenance."""
@@ -101,6 +116,8 @@ def save(fig, path: str | os.PathLike, *, source: str | None = None) -> None:
         ax.legend(loc="best")
     if source:
         fig.text(0.99, 0.005, source, ha="right", va="bottom", fontsize=6, color="0.4")
+    for a in fig.axes:
+        _plain_log_labels(a)
     fig.tight_layout(rect=(0, 0.02, 1, 1))
     try:
         with atomic_path(path, suffix=".partial.png") as tmp:

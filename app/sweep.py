@@ -137,15 +137,27 @@ def measure(scene, rt, *, cells, size, bounces, spp, frames, warmup, frame_time)
            "rays_per_depth": " ".join(str(x) for x in last.rays_per_depth),
            "device_mib": round(last.device_bytes / 2**20, 2),
            "guard_acted": sum(bool(s.guard.get("acted")) for s in stats)}
-    grouped = 0.0
-    for label, prefixes in STAGE_GROUPS:
-        ms = sum(v for k, v in stages.items() if prefixes and k.startswith(prefixes))
-        if not prefixes:   # "other": every stage no group names (raygen, geometry, ...)
-            ms = sum(stages.values()) - grouped
-        grouped += ms
-        row[_group_column(label)] = round(ms, 4)
+    row.update(group_stages(stages))
     row["stages_ms"] = {k: round(v, 4) for k, v in stages.items()}
     return row
+
+
+def _in_group(name: str, prefixes: tuple) -> bool:
+    """``render.trace`` names that stage only; ``bvh.`` (a trailing dot) every bvh stage."""
+    return any(name == p or (p.endswith(".") and name.startswith(p)) for p in prefixes)
+
+
+def group_stages(stages: dict[str, float]) -> dict[str, float]:
+    """Stage ms summed into the columns of :data:`STAGE_GROUPS`; "other" takes the rest."""
+    out, grouped = {}, 0.0
+    for label, prefixes in STAGE_GROUPS:
+        if prefixes:
+            ms = sum(v for k, v in stages.items() if _in_group(k, prefixes))
+        else:
+            ms = sum(stages.values()) - grouped
+        grouped += ms
+        out[_group_column(label)] = round(ms, 4)
+    return out
 
 
 def _group_column(label: str) -> str:
@@ -201,7 +213,7 @@ def run(args) -> int:
     bar = Progress(len(points), not args.quiet)
     skipped = 0
     for k, (cells, size, bounces, spp) in enumerate(points):
-        key_row = {"scene": str(Path(args.scene).resolve()), "device": rt.name, "cells": cells,
+        key_row = {"scene": str(args.scene), "device": rt.name, "cells": cells,
                    "width": size[0], "height": size[1], "bounces": bounces, "spp": spp,
                    "frames": args.frames, "warmup": args.warmup,
                    "frame_time": round(args.frame_time, 9)}
