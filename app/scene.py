@@ -363,6 +363,7 @@ class Scene:
     materials: dict[str, MaterialSpec] = field(default_factory=dict)
     meshes: tuple[MeshSpec, ...] = ()
     pool: PoolSpec | None = None
+    timeline: tuple = ()   # [[timeline]] events sorted by time (app.timeline)
 
 
 def _shading(value, src: SourceText, base: Path) -> ShadingSpec:
@@ -465,3 +466,13 @@ def check_material_names(scene: Scene) -> None:
                              f"{', '.join(sorted(known)) or 'none'}")
     if pool is not None and scene.water is None:
         raise InputError(f"{where}: [pool] needs a [water] section (the pool's size and depth)")
+
+
+# ---- [[timeline]]: scripted drops, rain, pushes and camera keys (app.timeline) -------------------
+def _timeline(value, src: SourceText, base: Path) -> tuple:
+    from app.timeline import parse_timeline
+
+    return parse_timeline(value, src, base)
+
+
+SECTIONS["timeline"] = _timeline
