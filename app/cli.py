@@ -16,6 +16,7 @@ COMMANDS = [
     ("devices", "app.cmd_devices", "list OpenCL platforms and devices"),
     ("render", "app.cmd_render", "render a scene file to a PNG (ray traced)"),
     ("simulate", "app.cmd_simulate", "run a scene's water (LBM) without rendering; save .npz"),
+    ("window", "app.window", "interactive window: rain, mouse ripples, orbit camera, HUD"),
     ("bench", "app.bench", "benchmarks: lbm, bvh, render"),
 ]
 
