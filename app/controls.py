@@ -230,7 +230,7 @@ class Controls:
         self._last = (0.0, 0.0)          # cursor at the last orbit/pan/drop
         self._last_pool: tuple | None = None
         self._moved = False
-        self._camera_dirty = True
+        self._camera_dirty = False       # the world starts with the scene's camera
         self.paused = False
         self._step = False
         self.rain_on = False
@@ -413,9 +413,10 @@ class Controls:
         r, self._requests = self._requests, Requests()
         return r
 
-    def reapply(self, world) -> None:
-        """After the world was rebuilt: give the new one the camera, rain and caustics."""
-        self._camera_dirty = True
+    def reapply(self, world, camera: bool = True) -> None:
+        """Give a new world the camera (unless ``camera`` is False: it has the scene's),
+        rain and caustics; they reach it with the next :meth:`apply`."""
+        self._camera_dirty = self._camera_dirty or camera
         self._rain_dirty = self.rain_on
         if self.caustics and hasattr(world, "set_caustics"):
             world.set_caustics(True)

@@ -427,7 +427,7 @@ class Viewer:
         self.path = display_path(rt)
         self.world = make_world(scene, rt, size=image, spp=spp, bounces=bounces,
                                 cells=self.cells)
-        self.controls.reapply(self.world)
+        self.controls.reapply(self.world, camera=False)
         self.next_frame = 0       # index of the next frame to enqueue (event time base)
         self.in_flight = 0
         self.shown = 0
