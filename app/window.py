@@ -338,6 +338,7 @@ class Presenter:
     def snapshot(self, size) -> np.ndarray:
         """The last image drawn as it appears on a ``size`` framebuffer, HUD excluded:
         (H, W, 4) uint8, row 0 on top."""
+        prev = self.ctx.fbo
         fbo = self.ctx.simple_framebuffer(tuple(size), components=4)
         try:
             fbo.use()
@@ -345,8 +346,11 @@ class Presenter:
             self.draw(size)
             data = fbo.read(components=4, alignment=1)
         finally:
-            self.ctx.screen.use()
             fbo.release()
+            if prev is not None:
+                prev.use()
+            else:   # a standalone context without a default framebuffer
+                self.ctx.fbo = None
         return np.frombuffer(data, np.uint8).reshape(size[1], size[0], 4)[::-1].copy()
 
 
