@@ -1,5 +1,6 @@
 """Benchmarks: median of repeated runs with OpenCL event times per stage, warm-up excluded,
-written as JSON (and CSV) under ``--out``. Subcommands: ``lbm``, ``bvh``, ``render``."""
+written as JSON (and CSV) under ``--out``. Subcommands: ``lbm``, ``bvh``, ``render``, ``frame``,
+``window``."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ BENCHES = [
     ("bvh", "app.bench_bvh", "GPU BVH build/refit/TLAS ms and ray rates vs NVIDIA Warp"),
     ("lbm", "app.bench_lbm", "LBM step: MLUPs/s and share of the measured copy bandwidth"),
     ("frame", "app.bench_frame", "the whole frame loop: LBM, surface, BVH, render"),
+    ("window", "app.bench_window", "the window's display path (EGL): frame + upload + draw"),
 ]
 
 
