@@ -51,24 +51,21 @@ def run(args) -> int:
     t0 = time.perf_counter()
     world = World(scene, args.device, width=args.width, height=args.height, spp=args.spp,
                   bounces=args.bounces, aov=args.aov is not None)
-    rs, renderer, rt = world.render_scene, world.renderer, world.rt
     img = world.frame()
-    rt.timer.reset()
     elapsed = time.perf_counter() - t0
-    fb = renderer.read_framebuffer()
-    if not np.isfinite(fb).all():
+    if not np.isfinite(world.read_radiance()).all():
         raise InputError(f"{args.scene}: the render produced non-finite pixels")
     import imageio.v3 as iio
 
     with atomic_path(args.output) as tmp:
         iio.imwrite(tmp, img, extension=".png")
     if args.aov is not None:
-        aov = renderer.read_aov()
+        aov = world.read_aov()
         with atomic_path(args.aov, suffix=".partial.npz") as tmp:
             np.savez_compressed(tmp, **aov)
-    stats = renderer.read_stats()
-    s = renderer.settings
-    print(f"{args.output}: {s.width}x{s.height}, {s.spp} spp, {s.bounces} bounces, "
-          f"{rs.n_triangles} triangles, {sum(stats['rays_per_depth'])} rays, "
-          f"{elapsed:.2f} s on {rt.name}")
+    st = world.stats
+    w, h = world.size
+    print(f"{args.output}: {w}x{h}, {world.spp} spp, {world.bounces} bounces, "
+          f"{st.n_triangles} triangles, {st.n_rays} rays, "
+          f"{elapsed:.2f} s on {world.device_name}")
     return 0

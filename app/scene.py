@@ -123,17 +123,6 @@ class CameraSpec:
     fov: float
 
 
-@dataclass(frozen=True)
-class Scene:
-    """A validated scene. ``extra`` holds sections added by other components, by name."""
-
-    path: Path
-    name: str
-    description: str
-    render: RenderSpec
-    camera: CameraSpec
-    water: WaterSpec | None
-    extra: dict = field(default_factory=dict)
 
 
 def _water(table: dict, src: SourceText) -> WaterSpec:
@@ -159,8 +148,8 @@ def _water(table: dict, src: SourceText) -> WaterSpec:
                      origin=v["origin"], rain=rain, drops=tuple(drops))
 
 
-#: Extra top-level sections: name -> parser(value, SourceText, base_dir) -> parsed object.
-#: Components register theirs here (for example lights, materials, meshes, sky).
+#: Top-level sections beyond the core: name -> parser(value, SourceText, base_dir) -> the typed
+#: value stored in the :class:`Scene` field of that name (lights, materials, meshes, sky, ...).
 SECTIONS: dict = {}
 
 _CORE = ("scene", "render", "camera", "water")
@@ -185,10 +174,10 @@ def parse_scene(text: str, path: Path) -> Scene:
     if camera.eye == camera.target:
         raise InputError(f"{src.where('camera', 'target')}: target equals eye {camera.eye}")
     water = _water(data["water"], src) if "water" in data else None
-    extra = {name: parser(data[name], src, path.parent)
-             for name, parser in SECTIONS.items() if name in data}
+    sections = {name: parser(data[name], src, path.parent)
+                for name, parser in SECTIONS.items() if name in data}
     return Scene(path=path, name=meta["name"] or path.stem, description=meta["description"],
-                 render=render, camera=camera, water=water, extra=extra)
+                 render=render, camera=camera, water=water, **sections)
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -204,7 +193,7 @@ def load_scene(path: str | Path) -> Scene:
 
 
 # ---- renderer sections: [shading], [sky], [[lights]], [materials.NAME], [[meshes]], [pool] ------
-# Registered in SECTIONS; parsed values land in Scene.extra under the section name.
+# Registered in SECTIONS; parsed values land in the Scene field of the section's name.
 
 SHADING_SCHEMA = {
     "pattern": Field("str", "auto", choices=("auto", "center", "rgss", "jittered"),
@@ -355,6 +344,27 @@ class PoolSpec:
     steps: int
 
 
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene: one typed field per section (None or empty when absent).
+
+    A component that adds a section adds its parser to :data:`SECTIONS` under the section name
+    and a field of the same name here."""
+
+    path: Path
+    name: str
+    description: str
+    render: RenderSpec
+    camera: CameraSpec
+    water: WaterSpec | None
+    shading: ShadingSpec | None = None
+    sky: SkySpec | None = None
+    lights: tuple[LightSpec, ...] = ()
+    materials: dict[str, MaterialSpec] = field(default_factory=dict)
+    meshes: tuple[MeshSpec, ...] = ()
+    pool: PoolSpec | None = None
+
+
 def _shading(value, src: SourceText, base: Path) -> ShadingSpec:
     return ShadingSpec(**validate_table(value, SHADING_SCHEMA, "shading", src, base))
 
@@ -439,13 +449,13 @@ SECTIONS.update({"shading": _shading, "sky": _sky, "lights": _lights, "materials
 
 def check_material_names(scene: Scene) -> None:
     """Every material a mesh or the pool names exists (one-line InputError naming it)."""
-    known = set(scene.extra.get("materials", {}))
+    known = set(scene.materials)
     where = f"{scene.path}"
     uses = []
-    for m in scene.extra.get("meshes", ()):
+    for m in scene.meshes:
         uses += [("meshes", "material", m.material)] if m.material else []
         uses += [("meshes", "materials", x) for x in m.materials.values()]
-    pool = scene.extra.get("pool")
+    pool = scene.pool
     if pool is not None:
         uses += [("pool", k, getattr(pool, k)) for k in
                  ("floor_material", "deck_material", "water_material") if getattr(pool, k)]

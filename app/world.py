@@ -1,225 +1,527 @@
-"""The one frame loop: a :class:`World` owns the device, the water solver, the render scene and
-the renderer, and every driver (``render``, the benchmarks, and later the window, capture and
-sweep) advances it through :meth:`World.frame`.
+"""The one frame loop: a :class:`World` is a scene made live on one device, and every driver
+(``render``, ``capture``, ``sweep``, the studies, the window, the benchmarks) advances it through
+:meth:`World.enqueue_frame` / :meth:`World.read_frame` (or :meth:`World.frame`, both at once).
+The API drivers use is documented in docs/frame_api.md; nothing deeper is theirs.
 
-One frame, all enqueued with no host sync inside::
+A frame is an ordered list of stages, each only enqueuing device work (no host sync inside):
 
-    lbm.step x k            the water advances by the frame's simulated time
-    lbm.surface             heights and normals into the water vertex buffers (device to device)
-    scene update            water BLAS refit (or rebuild), TLAS rebuild
-    render                  wavefront Whitted frame, tonemapped to RGBA8 on the device
+    inputs      drops and pushes queued since the last frame (by-value kernel arguments)
+    water       LBM steps for the frame's simulated time (the remainder of seconds/dt is
+                carried to the next frame), then the surface into the water mesh's buffers
+    scene       water BLAS refit (or rebuild), TLAS over the scene's device transform buffer
+    render      the wavefront Whitted frame, tonemapped to RGBA8 on the device
+    readback    non-blocking copies of the RGBA8 image, the guard record and the ray counts
+                into this frame's slot of host arrays
 
-then the RGBA8 image and a handful of guard scalars come back (:meth:`World.read_rgba`,
-:meth:`World.water_stats`). Nothing else crosses between host and device.
+A new stage (floating boats, caustics, a HUD) is one more object with a ``name`` and an
+``enqueue(frame)`` method, inserted in :attr:`World.stages` where its inputs are ready.
+Up to ``frames_in_flight`` frames are queued before the host waits on the oldest; a frame's
+stage times and stats are read when it has completed (a frame late), from a bounded ring.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
+import time
+from collections import deque
 from pathlib import Path
 
 import numpy as np
+import pyopencl as cl
 
-from app.assets import (
-    STONE,
-    TILES,
-    WATER,
-    load_texture,
-    material_from_spec,
-    mesh_transform,
-    pool_meshes,
-)
 from app.errors import InputError
-from app.scene import Scene
+
+
+@dataclasses.dataclass(frozen=True)
+class FrameStats:
+    """What one completed frame did and cost."""
+
+    frame: int                       #: frame index (0 is the first)
+    sim_time: float                  #: s of simulated water time at the end of the frame
+    lbm_steps: int                   #: LBM steps this frame took
+    stage_ms: dict                   #: stage name -> ms of device time (OpenCL events)
+    kernel_ms: float                 #: sum of stage_ms
+    wall_ms: float                   #: host ms from enqueueing the frame to its image
+    rays_per_depth: tuple            #: rays traced per bounce depth
+    n_rays: int                      #: their sum
+    n_triangles: int                 #: triangles in the scene
+    device_bytes: int                #: device memory held by this runtime's live buffers
+    guard: dict                      #: what the water guard saw and did this frame
+    water_cells: tuple | None        #: (nx, ny) of the water grid
+
+
+@dataclasses.dataclass(frozen=True)
+class Pick:
+    """A surface under a pixel: the world point, the instance and, on the water, the point in
+    pool coordinates (x, y in metres from the pool's corner, as add_drop and push take)."""
+
+    point: tuple
+    instance: int
+    water: bool
+    pool_xy: tuple | None
+
+
+@dataclasses.dataclass
+class Frame:
+    """One frame's inputs, as the stages see them."""
+
+    index: int
+    seconds: float
+    lbm_steps: int = 0
+    sim_time_end: float = 0.0
+    drops: list = dataclasses.field(default_factory=list)
+    pushes: list = dataclasses.field(default_factory=list)
+
+
+class _Slot:
+    """Host arrays one frame in flight reads into (the image in pinned memory)."""
+
+    def __init__(self, rt, n_pixels: int, guard_dtype, stats_len: int):
+        # pinned host memory: a buffer the driver allocates in host memory, mapped once
+        self.pinned = rt.buffer(4 * n_pixels, cl.mem_flags.ALLOC_HOST_PTR)
+        self.rgba, _ = cl.enqueue_map_buffer(rt.queue, self.pinned, cl.map_flags.READ, 0,
+                                             (4 * n_pixels,), np.uint8, is_blocking=True)
+        self.guard = np.zeros(1, guard_dtype) if guard_dtype is not None else None
+        self.counts = np.zeros(stats_len, np.uint32)
+        self.event: cl.Event | None = None
+        self.frame: Frame | None = None
+        self.t0 = 0.0
+        self.levels = 0
+
+
+def buffer_bytes(*roots) -> int:
+    """Sum of the sizes of the distinct device buffers reachable from ``roots`` through object
+    attributes, lists, tuples and dicts (objects of this project's packages only)."""
+    seen, total, stack = set(), 0, list(roots)
+    while stack:
+        o = stack.pop()
+        if o is None or id(o) in seen:
+            continue
+        seen.add(id(o))
+        if isinstance(o, cl.Buffer):
+            total += o.size
+        elif isinstance(o, list | tuple):
+            stack.extend(o)
+        elif isinstance(o, dict):
+            stack.extend(o.values())
+        elif type(o).__module__.split(".")[0] in ("raytrace", "lbm", "kernels", "app"):
+            stack.extend(vars(o).values() if hasattr(o, "__dict__") else ())
+    return total
+
+
+def _orbit_ok(eye, target) -> None:
+    if not np.isfinite(np.r_[eye, target]).all():
+        raise InputError("camera eye and target must be finite")
+    if np.allclose(eye, target):
+        raise InputError(f"camera target equals eye {tuple(eye)}")
 
 
 class World:
     """A scene made live on one device: water, geometry, lights, camera and renderer.
 
-    ``width``/``height``/``spp``/``bounces`` override the scene's ``[render]`` values;
-    ``water_steps`` overrides ``[pool] steps``, the LBM steps taken before the first frame.
+    ``scene``: an :class:`app.scene.Scene` or a path to a scene file. ``width``, ``height``,
+    ``spp``, ``bounces`` override ``[render]``; ``cells`` resizes the water grid (cells along
+    its longer side); ``water_steps`` overrides ``[pool] steps`` (LBM steps before the first
+    frame); ``seed`` overrides ``[shading] seed``; ``rebuild_water_bvh`` rebuilds the water BVH
+    each frame instead of refitting it.
     """
 
-    def __init__(self, scene: Scene, device=None, *, width=None, height=None, spp=None,
-                 bounces=None, aov=False, water_steps=None, rebuild_water_bvh=False):
-        from app.scene import check_material_names
+    def __init__(self, scene, device=None, *, width=None, height=None, spp=None, bounces=None,
+                 aov=False, water_steps=None, cells=None, rebuild_water_bvh=False,
+                 seed=None, frames_in_flight: int = 2):
+        from app.assemble import assemble, render_settings
+        from app.scene import Scene, load_scene
         from kernels import get_runtime
-        from raytrace.render_scene import RenderScene
+        from raytrace.render import Renderer
+        from raytrace.render_types import STATS_LEN
 
-        check_material_names(scene)
+        if isinstance(scene, str | Path):
+            scene = load_scene(scene)
+        if not isinstance(scene, Scene):
+            raise InputError(f"World: scene must be a scene file or app.scene.Scene, got "
+                             f"{type(scene).__name__}")
+        if not 1 <= int(frames_in_flight) <= 8:
+            raise InputError(f"frames_in_flight {frames_in_flight} out of range; allowed [1, 8]")
         self.scene = scene
         self.rt = get_runtime(device)
-        self.rebuild_water_bvh = rebuild_water_bvh
-        self.render_scene = RenderScene(self.rt)
-        self._textures: dict = {}
-        self._materials: dict = {}
-        self._add_materials_lights_sky()
-        self._add_meshes()
-        self.sim = None
-        if scene.water is not None:
-            self._add_water(water_steps)
-        if not self.render_scene.meshes:
-            raise InputError(f"{scene.path}: the scene has nothing to render (no [[meshes]], no "
-                             "[water])")
-        self.renderer = self._make_renderer(width, height, spp, bounces, aov)
-        self.frames = 0
-        self.last_stage_ms: dict[str, float] = {}
+        a = assemble(scene, self.rt, cells=cells, water_steps=water_steps)
+        self.render_scene, self.sim, self.water = a.render_scene, a.sim, a.water
+        self.instances = a.instances
+        self.rebuild_water_bvh = bool(rebuild_water_bvh)
+        self.renderer = Renderer(self.rt, self.render_scene, render_settings(
+            scene, width=width, height=height, spp=spp, bounces=bounces, aov=aov, seed=seed))
+        c = scene.camera
+        self.set_camera(c.eye, c.target, c.up, c.fov)
+        self._rain = scene.water.rain if scene.water is not None else None
+        self._carry = 0.0               # LBM steps owed to simulated time, < 1
+        self._time = 0.0                # simulated seconds when there is no water
+        self._next = 0                  # index of the next frame
+        self._drops: list = []
+        self._pushes: list = []
+        self._stage_ms: dict = {}       # frame index -> stage times, until its stats are made
+        self._stats: FrameStats | None = None
+        self._picker = None
+        from lbm.structs import GUARD_DTYPE
 
-    # -- building ---------------------------------------------------------------------------
-    def _texture(self, path: Path) -> int:
-        if path not in self._textures:
-            self._textures[path] = self.render_scene.add_texture(load_texture(path))
-        return self._textures[path]
+        guard_dtype = GUARD_DTYPE if self.sim is not None else None
+        self._slots = [_Slot(self.rt, self.renderer.n_pixels, guard_dtype, STATS_LEN)
+                       for _ in range(int(frames_in_flight))]
+        self._free = deque(self._slots)
+        self._in_flight: deque[_Slot] = deque()
+        self._guard_prev = None
+        if self.sim is not None:
+            self._guard_prev = self.sim.guard_record()
+        self.stages = [_Inputs(self), _Water(self), _SceneUpdate(self), _Render(self),
+                       _Readback(self)]
+        self.rt.finish()
+        self.rt.timer.reset()
 
-    def _add_materials_lights_sky(self) -> None:
-        from raytrace.render_scene import Sky
-        from raytrace.render_types import SkyKind
+    # -- inputs -----------------------------------------------------------------------------
+    def set_camera(self, eye, target, up=(0.0, 1.0, 0.0), fov=None) -> None:
+        """Camera for the next frames: eye and target in metres, vertical fov in degrees."""
+        eye = tuple(float(x) for x in eye)
+        target = tuple(float(x) for x in target)
+        up = tuple(float(x) for x in up)
+        fov = float(self.scene.camera.fov if fov is None else fov)
+        _orbit_ok(eye, target)
+        try:
+            self.renderer.set_camera(eye, target, up, fov)
+        except ValueError as exc:
+            raise InputError(f"camera: {exc}") from None
+        self._camera = (eye, target, up, fov)
 
-        rs, ex = self.render_scene, self.scene.extra
-        for name, m in ex.get("materials", {}).items():
-            self._materials[name] = rs.add_material(material_from_spec(m, rs, self._textures))
-        shading = ex.get("shading")
-        if shading is not None:
-            rs.ambient = shading.ambient
-        for li in ex.get("lights", ()):
-            rs.add_light(li.kind, direction=li.direction, color=li.color, position=li.position,
-                         inner_angle=li.inner_angle, outer_angle=li.outer_angle)
-        sky = ex.get("sky")
-        if sky is not None:
-            cube = -1
-            if sky.kind == "cubemap":
-                cube = len(rs.textures)
-                for p in sky.cubemap:
-                    rs.add_texture(load_texture(p))
-            rs.set_sky(Sky(kind=SkyKind.from_str(sky.kind), zenith=sky.zenith,
-                           horizon=sky.horizon, ground=sky.ground,
-                           sun_direction=sky.sun_direction, sun_color=sky.sun_color,
-                           sun_radius=sky.sun_radius, sun_glow=sky.sun_glow, cubemap=cube))
+    @property
+    def camera(self) -> tuple:
+        """(eye, target, up, fov) of the next frame."""
+        return self._camera
 
-    def _material(self, name: str, default: dict, texture: Path | None = None) -> int:
-        """The scene's material ``name``, or a built-in one (``default``) when name is empty."""
-        from raytrace.render_scene import Material
+    def _need_water(self, what: str) -> None:
+        if self.sim is None:
+            raise InputError(f"{what}: the scene has no [water]")
 
-        if name:
-            return self._materials[name]
-        key = f"<builtin {sorted(default.items())} {texture}>"
-        if key not in self._materials:
-            tex = -1 if texture is None else self._texture(texture)
-            self._materials[key] = self.render_scene.add_material(Material(**default,
-                                                                           texture=tex))
-        return self._materials[key]
+    def add_drop(self, x: float, y: float, radius: float, height: float) -> None:
+        """A drop of water (a smooth bump, ``height`` m, ``radius`` m) at pool point (x, y) m,
+        applied at the start of the next frame."""
+        self._need_water("add_drop")
+        self._drops.append(tuple(float(v) for v in (x, y, radius, height)))
 
-    def _add_meshes(self) -> None:
-        from app.meshes import load_mesh, load_mesh_groups, mtl_path, read_mtl, smooth_normals
+    def push(self, x: float, y: float, dx: float, dy: float, strength: float) -> None:
+        """Push the water along the drag from (x, y) to (x + dx, y + dy) m with ``strength``
+        m/s, applied at the start of the next frame."""
+        self._need_water("push")
+        self._pushes.append(tuple(float(v) for v in (x, y, dx, dy, strength)))
 
-        rs = self.render_scene
-        for m in self.scene.extra.get("meshes", ()):
-            V, F = load_mesh(m.file)
-            normals = smooth_normals(V, F) if m.smooth else None
-            groups = None if m.material else load_mesh_groups(m.file, len(F))
-            if m.material:
-                mesh = rs.add_mesh(V, F, normals=normals, material=self._materials[m.material])
-            elif groups is not None:
-                ids, names = groups
-                mtl = read_mtl(mtl_path(m.file))
-                table = []
-                for name in names:
-                    if name in m.materials:
-                        table.append(self._materials[m.materials[name]])
-                        continue
-                    c = mtl.get(name, {})
-                    ks = np.clip(np.asarray(c.get("Ks", (0.0, 0.0, 0.0))) * 0.25, 0, 1)
-                    table.append(self._material("", {
-                        "diffuse": tuple(c.get("Kd", (0.8, 0.8, 0.8))),
-                        "specular": tuple(ks), "shininess": float(min(c.get("Ns", 32.0), 1e4))}))
-                tri_mat = np.asarray(table, np.int64)[np.clip(ids, 0, len(table) - 1)]
-                mesh = rs.add_mesh(V, F, normals=normals, tri_materials=tri_mat)
-            else:
-                mesh = rs.add_mesh(V, F, normals=normals,
-                                   material=self._material("", TILES | {"specular": (0.2,) * 3}))
-            rs.add_instance(mesh, mesh_transform(V, m.position, m.rotation, m.size))
+    def set_rain(self, rate: float) -> None:
+        """Rain of ``rate`` drops per second over the pool (0 stops it); drop size and seed from
+        the scene's ``[water.rain]`` (defaults 3 cm radius, 5 mm height, seed 1)."""
+        self._need_water("set_rain")
+        rate = float(rate)
+        if not (math.isfinite(rate) and 0 <= rate <= 1e5):
+            raise InputError(f"rain rate {rate:g} is out of range; allowed [0, 1e5] per second")
+        r = self._rain
+        radius, height, seed = (r.radius, r.height, r.seed) if r else (0.03, 0.005, 1)
+        # a drop narrower than the grid resolves is widened to one cell, keeping its volume
+        wide = max(radius, self.sim.dx)
+        height *= (radius / wide) ** 2
+        try:
+            self.sim.set_rain(rate, wide, height, seed)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        self.rain_rate = rate
 
-    def _add_water(self, water_steps) -> None:
-        import lbm
+    # -- facts ------------------------------------------------------------------------------
+    @property
+    def size(self) -> tuple[int, int]:
+        s = self.renderer.settings
+        return s.width, s.height
 
-        rs, rt = self.render_scene, self.rt
-        w = self.scene.water
-        pool = self.scene.extra.get("pool")
-        nx, ny = w.cells
-        self.sim = lbm.from_water_spec(w, device=rt)
-        steps = water_steps if water_steps is not None else (pool.steps if pool else 30)
-        if steps:
-            self.sim.step(int(steps))
-        self.water_vertices = rt.buffer(16 * nx * ny)
-        self.water_normals = rt.buffer(16 * nx * ny)
-        self.sim.write_surface(self.water_vertices, self.water_normals, w.origin)
-        water_mat = self._material(pool.water_material if pool else "", WATER)
-        self.water_mesh = rs.add_mesh(self.water_vertices, lbm.grid_triangles(nx, ny),
-                                      normals=self.water_normals, material=water_mat,
-                                      dynamic=True, n_vertices=nx * ny)
-        rs.add_instance(self.water_mesh)
-        if pool is not None:
-            (Vp, Fp, uvp), deck = pool_meshes(w, pool)
-            tiles = self._material(pool.floor_material, TILES, pool.floor_texture)
-            rs.add_instance(rs.add_mesh(Vp, Fp, uvs=uvp, material=tiles))
-            if deck is not None:
-                Vd, Fd, uvd = deck
-                rs.add_instance(rs.add_mesh(Vd, Fd, uvs=uvd,
-                                            material=self._material(pool.deck_material, STONE)))
+    @property
+    def spp(self) -> int:
+        return self.renderer.settings.spp
 
-    def _make_renderer(self, width, height, spp, bounces, aov):
-        from raytrace.render import Renderer, RenderSettings
+    @property
+    def bounces(self) -> int:
+        return self.renderer.settings.bounces
 
-        r, shading = self.scene.render, self.scene.extra.get("shading")
-        settings = RenderSettings(
-            width=width or r.width, height=height or r.height, spp=spp or r.spp,
-            bounces=r.bounces if bounces is None else bounces, aov=aov,
-            pattern=None if shading is None or shading.pattern == "auto" else shading.pattern,
-            order=shading.order if shading else "tiles",
-            fresnel=shading.fresnel if shading else "exact",
-            tonemap=shading.tonemap if shading else "aces",
-            exposure=shading.exposure if shading else 1.0,
-            min_weight=shading.min_contribution if shading else 1e-3,
-            seed=shading.seed if shading else 0)
-        renderer = Renderer(self.rt, self.render_scene, settings)
-        c = self.scene.camera
-        renderer.set_camera(c.eye, c.target, c.up, c.fov)
-        return renderer
+    @property
+    def device_name(self) -> str:
+        return self.rt.name
 
-    # -- the frame --------------------------------------------------------------------------
+    @property
+    def sim_time(self) -> float:
+        return self.sim.time if self.sim is not None else self._time
+
+    @property
+    def stats(self) -> FrameStats | None:
+        """The last completed frame's :class:`FrameStats` (None before the first)."""
+        return self._stats
+
+    @property
+    def frames_enqueued(self) -> int:
+        return self._next
+
     def steps_for(self, seconds: float) -> int:
-        """LBM steps that advance the water by ``seconds`` of simulated time (at least 1)."""
+        """LBM steps the next frame takes for ``seconds`` of simulated time (carrying the
+        remainder from earlier frames); 0 without water."""
         if self.sim is None:
             return 0
-        return max(1, round(seconds / self.sim.dt))
+        return int(math.floor(self._carry + seconds / self.sim.dt + 1e-9))
 
-    def enqueue_frame(self, water_steps: int = 0) -> None:
-        """Queue one frame: ``water_steps`` LBM steps, the water surface, BVH update, render.
+    # -- the frame --------------------------------------------------------------------------
+    def enqueue_frame(self, seconds: float = 0.0) -> int:
+        """Queue one frame advancing the water by ``seconds``; returns its index. Waits only
+        when ``frames_in_flight`` frames are already queued (for the oldest of them)."""
+        seconds = float(seconds)
+        if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
+            raise InputError(f"frame seconds {seconds:g} is out of range; allowed [0, 3600]")
+        if not self._free:
+            self._complete(self._in_flight.popleft(), keep_image=False)
+        slot = self._free.popleft()
+        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes)
+        self._drops, self._pushes = [], []
+        slot.frame, slot.t0 = frame, time.perf_counter()
+        for stage in self.stages:
+            stage.enqueue(frame, slot)
+        self.rt.timer.close_frame(frame.index)
+        self._in_flight.append(slot)
+        self._next += 1
+        return frame.index
 
-        No host sync inside; read the image with :meth:`read_rgba`. The previous frame's stage
-        times move to :attr:`last_stage_ms` first (its events are complete by then).
-        """
-        self.last_stage_ms = self.rt.timer.collect()
-        if self.sim is not None and water_steps > 0:
-            self.sim.step(int(water_steps))
-            self.sim.write_surface(self.water_vertices, self.water_normals,
-                                   self.scene.water.origin)
-        self.render_scene.update(rebuild=self.rebuild_water_bvh)
-        self.renderer.enqueue_frame(update_scene=False)
-        self.frames += 1
+    def advance(self, seconds: float) -> None:
+        """Advance the water by ``seconds`` (inputs applied) without rendering: the frame's
+        index still counts, so a frame rendered afterwards is the one a run would render."""
+        seconds = float(seconds)
+        if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
+            raise InputError(f"advance seconds {seconds:g} is out of range; allowed [0, 3600]")
+        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes)
+        self._drops, self._pushes = [], []
+        for stage in self.stages:
+            if stage.name in ("inputs", "water"):
+                stage.enqueue(frame, None)
+        self._next += 1
 
-    def frame(self, water_steps: int = 0) -> np.ndarray:
-        """One whole frame; returns the RGBA8 image (height, width, 4), top row first."""
-        self.enqueue_frame(water_steps)
-        return self.read_rgba()
+    def read_frame(self) -> tuple[int, np.ndarray]:
+        """Wait for the oldest frame in flight; its index and RGBA8 image (height, width, 4)."""
+        if not self._in_flight:
+            raise InputError("read_frame: no frame in flight (call enqueue_frame first)")
+        slot = self._in_flight.popleft()
+        return slot.frame.index, self._complete(slot, keep_image=True)
 
-    def read_rgba(self) -> np.ndarray:
-        return self.renderer.read_rgba()
+    def frame(self, seconds: float = 0.0) -> np.ndarray:
+        """One whole frame: advance the water by ``seconds``, render, return RGBA8 (height,
+        width, 4), row 0 at the top. Frames still in flight are completed first."""
+        index = self.enqueue_frame(seconds)
+        while True:
+            i, img = self.read_frame()
+            if i == index:
+                return img
 
-    def water_stats(self) -> dict | None:
-        """The solver's guard record (mass, max speed, min depth, NaN flag, actions taken)."""
-        return None if self.sim is None else self.sim.stats()
+    def drain(self) -> None:
+        """Complete every frame in flight (their stats become available)."""
+        while self._in_flight:
+            self._complete(self._in_flight.popleft(), keep_image=False)
 
-    def stage_times(self) -> dict[str, float]:
-        """Milliseconds per stage of the frames since the last call (waits on their events)."""
-        self.last_stage_ms = self.rt.timer.collect()
-        return self.last_stage_ms
+    def _complete(self, slot: _Slot, keep_image: bool):
+        slot.event.wait()
+        wall = (time.perf_counter() - slot.t0) * 1e3
+        for tag, ms in self.rt.timer.completed():
+            self._stage_ms[tag] = ms
+        f = slot.frame
+        stage_ms = self._stage_ms.pop(f.index, {})
+        for old in [k for k in self._stage_ms if k < f.index]:
+            del self._stage_ms[old]
+        img = slot.rgba.reshape(self.size[1], self.size[0], 4).copy() if keep_image else None
+        self._stats = self._make_stats(slot, stage_ms, wall)
+        self._free.append(slot)
+        return img
+
+    def _make_stats(self, slot: _Slot, stage_ms: dict, wall_ms: float) -> FrameStats:
+        f = slot.frame
+        per_depth = tuple(int(x) for x in slot.counts[: slot.levels + 1])
+        if not self.render_scene.has_secondary or self.renderer.settings.bounces == 0:
+            per_depth = per_depth[:1]
+        guard = {"nan": False, "acted": False, "report": "ok"}
+        if self.sim is not None:
+            g = slot.guard[0]
+            guard = self.sim.guard_summary(g, self._guard_prev)
+            self._guard_prev = g.copy()
+            guard["acted"] = guard.get("acted", bool(guard["restored"] or guard["damped"]
+                                                      or guard["clamped"]))
+            guard.pop("time", None)
+            guard.pop("steps", None)
+        return FrameStats(
+            frame=f.index, sim_time=f.sim_time_end, lbm_steps=f.lbm_steps,
+            stage_ms=stage_ms, kernel_ms=float(sum(stage_ms.values())), wall_ms=wall_ms,
+            rays_per_depth=per_depth, n_rays=int(sum(per_depth)),
+            n_triangles=self.render_scene.n_triangles,
+            device_bytes=self._device_bytes(), guard=guard,
+            water_cells=None if self.sim is None else (self.sim.nx, self.sim.ny))
+
+    def _device_bytes(self) -> int:
+        """Bytes of the device buffers the frame's objects hold (walked once, then cached until
+        the scene reallocates)."""
+        key = (id(self.render_scene.scene.trace_args()[0]), self.render_scene.n_triangles)
+        if getattr(self, "_bytes_key", None) != key:
+            self._bytes_key = key
+            self._bytes = buffer_bytes(self.renderer, self.render_scene, self.sim)
+        return self._bytes
+
+    # -- queries (each synchronises) ---------------------------------------------------------
+    def pick(self, px: float, py: float) -> Pick | None:
+        """The surface under pixel (px, py) (0, 0 is the top-left corner) as the camera of the
+        next frame sees it, traced against the live scene (water mesh included), or None."""
+        from raytrace.bvh import HIT_DTYPE
+        from raytrace.query import RayQuery
+
+        w, h = self.size
+        if not (0 <= px < w and 0 <= py < h):
+            return None
+        cam = self.renderer.camera
+        sx = 2.0 * (px / w) - 1.0
+        sy = 1.0 - 2.0 * (py / h)
+        d = (np.asarray(cam["forward"][:3], np.float64) + sx * cam["right"][:3]
+             + sy * cam["up"][:3])
+        d /= np.linalg.norm(d)
+        o = np.asarray(cam["origin"][:3], np.float64)
+        rt = self.rt
+        scene = self.render_scene.scene
+        if self._picker is None or self._picker[1] is not scene.trace_args()[0]:
+            bufs = (rt.buffer(16), rt.buffer(16), rt.buffer(HIT_DTYPE.itemsize))
+            self._picker = (RayQuery(scene, *bufs, 1, stage="pick"), scene.trace_args()[0])
+        q = self._picker[0]
+        q.rebind_scene()
+        cl.enqueue_copy(rt.queue, q.org, np.array([*o, 0.0], np.float32))
+        cl.enqueue_copy(rt.queue, q.dirs, np.array([*d, np.inf], np.float32))
+        q.enqueue()
+        hit = rt.to_host(q.hits, HIT_DTYPE, 1)[0]
+        if hit["prim"] < 0:
+            return None
+        p = o + float(hit["t"]) * d
+        inst = int(hit["inst"])
+        on_water = self.water is not None and inst == self.water.instance
+        xy = None
+        if on_water:
+            ox, _, oz = self.water.origin
+            xy = (float(p[0] - ox), float(p[2] - oz))
+        return Pick(tuple(float(v) for v in p), inst, on_water, xy)
+
+    def read_aov(self) -> dict:
+        """Primary-hit AOVs of the last frame (the World must be made with ``aov=True``)."""
+        self.drain()
+        return self.renderer.read_aov()
+
+    def read_radiance(self) -> np.ndarray:
+        """Linear radiance (height, width, 3) of the last frame, before tonemapping."""
+        self.drain()
+        return self.renderer.read_framebuffer()
+
+    def water_fields(self) -> dict | None:
+        """h, u, v, bed of the water now (host copies; for saving and tests)."""
+        self.drain()
+        return None if self.sim is None else self.sim.fields()
+
+    def close(self) -> None:
+        """Complete the frames in flight and release the pinned image buffers."""
+        self.drain()
+        for s in self._slots:
+            s.rgba.base.release()
+        self._slots, self._free = [], deque()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+# ---- the stages ---------------------------------------------------------------------------
+class _Inputs:
+    """Drops and pushes queued since the last frame, applied first (by-value arguments)."""
+
+    name = "inputs"
+
+    def __init__(self, world: World):
+        self.world = world
+
+    def enqueue(self, frame: Frame, slot: _Slot) -> None:
+        sim = self.world.sim
+        if sim is None:
+            return
+        try:
+            for d in frame.drops:
+                sim.add_drop(*d)
+            for p in frame.pushes:
+                sim.push(*p)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+
+
+class _Water:
+    """LBM steps for the frame's simulated time, then the surface into the water mesh."""
+
+    name = "water"
+
+    def __init__(self, world: World):
+        self.world = world
+
+    def enqueue(self, frame: Frame, slot: _Slot) -> None:
+        w = self.world
+        if w.sim is None:
+            w._time += frame.seconds
+            frame.sim_time_end = w._time
+            return
+        owed = w._carry + frame.seconds / w.sim.dt
+        steps = int(math.floor(owed + 1e-9))
+        w._carry = max(0.0, owed - steps)
+        frame.lbm_steps = steps
+        if steps:
+            w.sim.step(steps)
+        if steps or frame.drops or frame.pushes:
+            w.sim.write_surface(w.water.vertices, w.water.normals, w.water.origin)
+        frame.sim_time_end = w.sim.time
+
+
+class _SceneUpdate:
+    """Water BLAS refit (or rebuild) and the TLAS over the scene's transforms."""
+
+    name = "scene"
+
+    def __init__(self, world: World):
+        self.world = world
+
+    def enqueue(self, frame: Frame, slot: _Slot) -> None:
+        self.world.render_scene.update(rebuild=self.world.rebuild_water_bvh)
+
+
+class _Render:
+    """The wavefront frame, tonemapped to RGBA8 on the device."""
+
+    name = "render"
+
+    def __init__(self, world: World):
+        self.world = world
+
+    def enqueue(self, frame: Frame, slot: _Slot) -> None:
+        r = self.world.renderer
+        r.enqueue_frame(update_scene=False)
+        slot.levels = r._levels
+
+
+class _Readback:
+    """Non-blocking copies of the image, the ray counts and the guard record into the slot."""
+
+    name = "readback"
+
+    def __init__(self, world: World):
+        self.world = world
+
+    def enqueue(self, frame: Frame, slot: _Slot) -> None:
+        w = self.world
+        q = w.rt.queue
+        r = w.renderer
+        cl.enqueue_copy(q, slot.counts, r.stats, is_blocking=False)
+        if w.sim is not None:
+            cl.enqueue_copy(q, slot.guard, w.sim.guard_buffer, is_blocking=False)
+        slot.event = cl.enqueue_copy(q, slot.rgba, r.rgba, is_blocking=False)
+        q.flush()

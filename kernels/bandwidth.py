@@ -19,12 +19,12 @@ def measure_copy_bandwidth(rt: Runtime, nbytes: int = 256 << 20, reps: int = 10)
     src = rt.buffer(nbytes)
     dst = rt.buffer(nbytes)
     cl.enqueue_fill_buffer(rt.queue, src, np.float32(1.0), 0, nbytes)
-    kern = rt.kernel("bandwidth.cl", "copy_float4")
-    kern.set_args(src, dst, np.uint32(n))
+    kern = rt.kernel_launcher("bandwidth.cl", "copy_float4", stage="bandwidth.copy_kernel")
+    kern.bind(src=src, dst=dst, n=n).set_size(n)
     result = {"bytes": nbytes}
     for label, enqueue in (
         ("enqueue_copy", lambda: cl.enqueue_copy(rt.queue, dst, src, byte_count=nbytes)),
-        ("copy_kernel", lambda: cl.enqueue_nd_range_kernel(rt.queue, kern, (n,), None)),
+        ("copy_kernel", kern),
     ):
         enqueue().wait()
         times = []

@@ -44,16 +44,16 @@ inline void accumulate_pixel(__constant const RenderParams* prm, __constant cons
     if (finish) rgba[p] = tonemap_rgba8(c.xyz, prm);
 }
 
-/* Grid-stride over k: (scatter != 0) ray k's children go into `out`; k < n_q: pixel q0 + k. */
+/* Grid-stride over k: (gp.scatter) ray k's children go into `out`; k < n_q: pixel q0 + k. */
 __kernel void render_gather(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
                             __constant const Camera* cam, __global const Ray* rays,
                             __global const Hit* hits, __global const uint* counts,
                             const uint depth, __global const uint* child_offsets,
                             __global const uint* block_sums, __global Ray* out,
-                            const uint scatter, const uint q0, const uint n_q,
-                            __global const float4* radiance, __global float4* fb,
-                            const uint finish, __global uchar4* rgba)
+                            const GatherParams gp, __global const float4* radiance,
+                            __global float4* fb, __global uchar4* rgba)
 {
+    const uint scatter = gp.scatter, q0 = gp.q0, n_q = gp.n_q, finish = gp.finish;
     const uint n = counts[depth];
     const uint end = scatter ? max(n, n_q) : n_q;
     for (uint k = get_global_id(0); k < end; k += get_global_size(0)) {

@@ -122,6 +122,22 @@ typedef struct {
     float min_weight, pad0, pad1, pad2;
 } RenderParams;
 
+/* 16 bytes. render_raygen's per-launch values: the chunk it starts. */
+typedef struct {
+    uint q0;            /* first tile-order pixel of the chunk */
+    uint n_rays;        /* primary rays of the chunk (pixels x spp) */
+    uint zero_stats;    /* 1 on the frame's first chunk: zero the stats */
+    uint pad;
+} RaygenParams;
+
+/* 16 bytes. render_gather's per-launch values: what this level of this chunk does. */
+typedef struct {
+    uint scatter;       /* 1: scatter the rays' children into the next wavefront */
+    uint q0;            /* first tile-order pixel of the chunk */
+    uint n_q;           /* pixels of the chunk */
+    uint finish;        /* 1 on the chunk's last level: tonemap into the RGBA8 image */
+} GatherParams;
+
 /* 32 bytes. Primary-hit outputs per pixel (sample 0 of the pixel). */
 typedef struct {
     float4 normal;      /* xyz world shading normal facing the camera, 0 on a miss */

@@ -58,11 +58,13 @@ class Runtime:
     """A device, its context and its profiling queue; builds and caches programs and kernels."""
 
     def __init__(self, device: cl.Device | str | None = None, *, profiling: bool = True,
-                 bvh_layout: str | None = None):
+                 bvh_layout: str | None = None, kernel_arg_info: bool = True):
         """``bvh_layout``: how scenes store their BLASes for traversal, ``"binary"`` or
         ``"wide"`` (raytrace.bvh_wide); default ``LBWATER_BVH_LAYOUT`` or, unset, binary on a GPU
         and wide on a CPU. Every program is built with the matching ``TRACE_WIDE`` define unless
-        its defines name one."""
+        its defines name one. ``kernel_arg_info``: build with ``-cl-kernel-arg-info`` so
+        kernels.launch reads argument names off the device (False: from the sources, the
+        fallback for devices without argument info; tests use it)."""
         self.device = device if isinstance(device, cl.Device) else select_device(device)
         self.context = cl.Context([self.device])
         props = cl.command_queue_properties.PROFILING_ENABLE if profiling else 0
@@ -70,6 +72,8 @@ class Runtime:
         self.timer = StageTimer(enabled=profiling)
         self._programs: dict[tuple, cl.Program] = {}
         self._kernels: dict[tuple, cl.Kernel] = {}
+        self._kernel_args: dict[tuple, tuple] = {}
+        self.kernel_arg_info = bool(kernel_arg_info)
         self._hash = _source_hash()
         layout = bvh_layout or os.environ.get("LBWATER_BVH_LAYOUT") or (
             "binary" if self.is_gpu else "wide")
@@ -101,6 +105,8 @@ class Runtime:
             raise KernelBuildError(f"kernel source {path} does not exist")
         options = [f"-I{KERNEL_DIR}", f"-DLBWATER_SRC_HASH=0x{self._hash}",
                    "-cl-std=CL1.2"]
+        if self.kernel_arg_info:
+            options.append("-cl-kernel-arg-info")
         if "nvidia" in self.device.platform.name.lower():
             options.append("-DLBWATER_NVIDIA=1")  # common.h: DEVICE_FENCE
         options += [_format_define(k, v) for k, v in key[1]]
@@ -132,19 +138,36 @@ class Runtime:
             self._kernels[key] = k
         return k
 
+    def kernel_args(self, source: str, name: str, defines: dict | None,
+                    kernel: cl.Kernel) -> tuple:
+        """Parameters of kernel ``name`` (kernels.launch.KernelArg), read once per program: from
+        the device's argument info, or parsed from the source where the device has none."""
+        from kernels.launch import device_kernel_args, parse_kernel_args
+
+        key = (source, name, tuple(sorted((defines or {}).items())))
+        args = self._kernel_args.get(key)
+        if args is None:
+            args = device_kernel_args(kernel) if self.kernel_arg_info else None
+            if args is None:
+                args = parse_kernel_args(source, name)
+            self._kernel_args[key] = args
+        return args
+
     # -- launches ---------------------------------------------------------------------------
+    def kernel_launcher(self, source: str, name: str, *, stage: str, defines: dict | None = None):
+        """A :class:`kernels.launch.Kernel`: its own kernel object of ``kernels/<source>``,
+        arguments bound by name, each launch timed as ``stage``."""
+        from kernels.launch import Kernel
+
+        return Kernel(self, source, name, stage=stage, defines=defines)
+
     def launch(self, stage: str, kernel: cl.Kernel, global_size, local_size=None, *,
                wait_for=None) -> cl.Event:
-        """Enqueue ``kernel`` (its arguments already bound) and time it as ``stage``.
+        """Deprecated: kept only while lbm/solver.py binds raw kernels by position; use
+        :meth:`kernel_launcher`. Enqueue ``kernel`` and time it as ``stage``."""
+        from kernels.launch import enqueue_bound
 
-        ``global_size`` is rounded up to a multiple of ``local_size``; kernels guard their index.
-        """
-        gs = tuple(int(g) for g in np.atleast_1d(global_size))
-        ls = None if local_size is None else tuple(int(v) for v in np.atleast_1d(local_size))
-        if ls is not None:
-            gs = tuple(-(-g // w) * w for g, w in zip(gs, ls, strict=True))
-        evt = cl.enqueue_nd_range_kernel(self.queue, kernel, gs, ls, wait_for=wait_for)
-        return self.timer.record(stage, evt)
+        return enqueue_bound(self, stage, kernel, global_size, local_size, wait_for=wait_for)
 
     def record(self, stage: str, event: cl.Event) -> cl.Event:
         """Time an event that did not come from :meth:`launch` (a copy, a fill)."""

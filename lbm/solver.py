@@ -516,8 +516,20 @@ class ShallowWater:
         """
         g = self.guard_record()
         prev, self._reported = self._reported, np.array([g], GUARD_DTYPE)
-        delta = {k: int(g[k]) - int(prev[0][k]) for k in ("clamped", "restored", "damped",
-                                                          "saved")}
+        return self.guard_summary(g, prev[0])
+
+    @property
+    def guard_buffer(self) -> cl.Buffer:
+        """The device guard record (``GUARD_DTYPE``), current as of the last check: a frame
+        loop copies it without blocking and reads it with :meth:`guard_summary`."""
+        if self._dirty:
+            self._check(SaveRequest.NO)
+        return self._guard
+
+    def guard_summary(self, g: np.void, prev: np.void) -> dict:
+        """:meth:`stats`'s dict for guard record ``g``, counts taken since record ``prev``."""
+        delta = {k: int(g[k]) - int(prev[k]) for k in ("clamped", "restored", "damped",
+                                                        "saved")}
         out = {
             "time": self.time,
             "steps": self.steps,

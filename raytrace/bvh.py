@@ -20,7 +20,7 @@ import pyopencl as cl
 
 from kernels.runtime import Runtime
 from raytrace.bvh_wide import WideBvh, WideStorage
-from raytrace.sort import Launch, SortMethod, make_sorter
+from raytrace.sort import SortMethod, make_sorter
 
 _F4 = (np.float32, 4)
 NODE_DTYPE = np.dtype([("lo_l", _F4), ("hi_l", _F4), ("lo_r", _F4), ("hi_r", _F4)])
@@ -152,31 +152,27 @@ class Blas:
         self.built = False
 
     def _bind_kernels(self) -> None:
-        prg = self.rt.program("bvh_build.cl")
-        s, n = self.storage, np.uint32(self.n_triangles)
-        nv = np.uint32(self.n_vertices)
-        v, t = self.vertices_buf, self.triangles_buf
-        idx = np.int32(s.info_index)
+        """The four build launches, bound by name and sized once."""
+        rt, st, s, nt = self.rt, self.stage, self.storage, self.n_triangles
+        mesh = {"verts": self.vertices_buf, "tris": self.triangles_buf, "nv": self.n_vertices,
+                "infos": s.infos, "info_index": s.info_index}
 
-        def k(name, *args):
-            kern = cl.Kernel(prg, name)
-            kern.set_args(*args)
-            return kern
+        def kernel(name, stage):
+            return rt.kernel_launcher("bvh_build.cl", name, stage=f"{st}.{stage}")
 
-        self._k_reset_build = k("bvh_reset_info", s.infos, idx, np.int32(n))
-        self._k_bounds = k("bvh_tri_bounds", v, t, n, nv, s.infos, idx)
-        self._k_morton = k("bvh_tri_morton", v, t, n, nv, s.infos, idx, np.int32(self.key_bits),
-                           self.keys, self.order)
-        self._k_hier = k("bvh_gather_hierarchy", v, t, np.int32(n), nv, self.order, s.tris,
-                         np.int32(self.leaf_size), np.int32(s.node_base), np.int32(s.tri_base),
-                         self.keys, s.nodes, self.flags, s.infos, idx)
-        groups = min(-(-self.n_triangles // BOUNDS_WG), 4 * self.rt.device.max_compute_units * 8)
-        rt, st, nt = self.rt, self.stage, self.n_triangles
-        self._reset_build = Launch(rt, f"{st}.reset", self._k_reset_build, 1)
-        self._bounds = Launch(rt, f"{st}.bounds", self._k_bounds, max(groups, 1) * BOUNDS_WG,
-                              BOUNDS_WG)
-        self._morton = Launch(rt, f"{st}.morton", self._k_morton, nt, 64)
-        self._hier = Launch(rt, f"{st}.hierarchy", self._k_hier, nt, 64)
+        self._reset_build = kernel("bvh_reset_info", "reset").bind(
+            infos=s.infos, info_index=s.info_index, n_prims=nt).set_size(1)
+        groups = min(-(-nt // BOUNDS_WG), 4 * rt.device.max_compute_units * 8)
+        self._bounds = kernel("bvh_tri_bounds", "bounds").bind(n_tris=nt, **mesh)
+        self._bounds.set_size(max(groups, 1) * BOUNDS_WG, BOUNDS_WG)
+        self._morton = kernel("bvh_tri_morton", "morton").bind(
+            n_tris=nt, key_bits=self.key_bits, keys=self.keys, vals=self.order, **mesh)
+        self._morton.set_size(nt, 64)
+        self._hier = kernel("bvh_gather_hierarchy", "hierarchy").bind(
+            n=nt, order=self.order, prims=s.tris, leaf_size=self.leaf_size,
+            node_base=s.node_base, prim_base=s.tri_base, keys=self.keys, nodes=s.nodes,
+            flags=self.flags, **mesh)
+        self._hier.set_size(nt, 64)
 
     # -- device work (enqueue only) -----------------------------------------------------------
     def rebuild(self) -> None:

@@ -18,7 +18,6 @@ import numpy as np
 import pyopencl as cl
 
 from kernels.runtime import Runtime
-from raytrace.sort import Launch
 
 WIDTH = 8          #: children per wide node (WIDE_WIDTH in kernels/bvh.h)
 BLOCK = 4          #: triangles per block (WIDE_BLOCK)
@@ -103,24 +102,26 @@ class WideBvh:
             raise ValueError(f"wide BVH: the binary tree may be {depth_bound} levels deep, more "
                              f"than the {MAX_LEVELS} the wide tree holds")
         self.rt, self.storage = rt, storage
-        prg = rt.program("bvh_wide.cl")
         s, b = storage, blas.storage
+        common = {"winfos": s.infos, "wide_base": s.node_base,
+                  "block_base": s.block_base, "wide_src": s.src, "wnodes": s.nodes,
+                  "block_src": s.block_src}
         self._levels = []
         # level L has at most 8^L nodes: a grid-stride launch of up to `cap` work-items each
         cap = max(4 * rt.device.max_compute_units * _WG, _WG)
         for level in range(depth_bound):
-            k = cl.Kernel(prg, "bvh_wide_collapse")
-            k.set_args(np.int32(level), b.nodes, b.infos, np.int32(b.info_index), s.infos,
-                       np.int32(s.node_base), np.int32(s.block_base), s.bin, s.src, s.nodes,
-                       s.block_src)
+            k = rt.kernel_launcher("bvh_wide.cl", "bvh_wide_collapse",
+                                   stage=f"{stage}.wide.collapse")
+            k.bind(level=level, nodes=b.nodes, infos=b.infos, info_index=b.info_index,
+                   wide_bin=s.bin, **common)
             size = 1 if level == 0 else min(WIDTH ** min(level, 10), cap)
-            self._levels.append(Launch(rt, f"{stage}.wide.collapse", k, size,
-                                       1 if level == 0 else _WG))
-        k = cl.Kernel(prg, "bvh_wide_refit")
-        k.set_args(b.nodes, b.tris, s.infos, np.int32(s.info_index), np.int32(s.node_base),
-                   np.int32(s.block_base), s.src, s.nodes, s.block_src, s.blocks)
+            self._levels.append(k.set_size(size, 1 if level == 0 else _WG))
+        self._refit = rt.kernel_launcher("bvh_wide.cl", "bvh_wide_refit",
+                                         stage=f"{stage}.wide.refit")
+        self._refit.bind(nodes=b.nodes, tris=b.tris, info_index=s.info_index,
+                         blocks=s.blocks, **common)
         n_work = max(wide_node_bound(blas.n_triangles), block_bound(blas.n_triangles))
-        self._refit = Launch(rt, f"{stage}.wide.refit", k, min(n_work, cap), _WG)
+        self._refit.set_size(min(n_work, cap), _WG)
 
     @property
     def root(self) -> int:

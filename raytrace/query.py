@@ -50,18 +50,17 @@ class RayQuery:
         self.rt, self.n, self.stage = scene.rt, int(n), stage
         name = "trace_any" if any_hit else "trace_closest"
         defines = {**scene.trace_defines, **(defines or {})}
-        self._k = cl.Kernel(scene.rt.program("trace_query.cl", defines), name)
-        self._k.set_args(*scene.trace_args(), np.int32(n), org, dirs, hits)
+        self._k = scene.rt.kernel_launcher("trace_query.cl", name, stage=stage, defines=defines)
+        self._k.bind(**scene.trace_bindings(), n=self.n, org=org, dir=dirs, hits=hits)
         # kernel arguments hold no references: keep the buffers alive as long as the query
         self._scene, self.org, self.dirs, self.hits = scene, org, dirs, hits
 
     def rebind_scene(self) -> None:
         """Call after the scene reallocated its buffers (a mesh or instance was added)."""
-        for i, buf in enumerate(self._scene.trace_args()):
-            self._k.set_arg(i, buf)
+        self._k.bind(**self._scene.trace_bindings())
 
     def enqueue(self, local_size: int | None = 64) -> cl.Event:
-        return self.rt.launch(self.stage, self._k, self.n, local_size)
+        return self._k.launch(self.n, local_size)
 
 
 def intersect(vertices, triangles, origins, directions, *, tmin=0.0, tmax=np.inf,

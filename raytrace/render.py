@@ -32,14 +32,18 @@ import math
 import numpy as np
 import pyopencl as cl
 
+from kernels.launch import Kernel
+from kernels.pinned import PinnedRing, ReadHandle
 from kernels.runtime import Runtime
 from raytrace.bvh import HIT_DTYPE
 from raytrace.render_scene import RenderScene
 from raytrace.render_types import (
     AOV,
     CAMERA,
+    GATHER_PARAMS,
     MAX_DEPTH,
     RAY,
+    RAYGEN_PARAMS,
     RENDERPARAMS,
     SCAN_BLOCK,
     SCAN_WG,
@@ -74,7 +78,8 @@ class RenderSettings:
     memory_fraction: float = 0.25  #: most of the device memory the ray buffers may take
     max_chunk_rays: int | None = None  #: cap on primary rays per chunk (tests of the tiling)
     aov: bool = False             #: write primary depth/normal/prim/inst per pixel
-    adaptive_depth: bool = True   #: launch only as many levels as the last frame needed
+    size_hints: bool = True       #: size each level's launches from the last counts read back
+                                  #: (any size is correct: the image never depends on it)
     local_size: int = 64          #: work-group size of the per-ray and per-pixel stages
     fuse_trace_shade: bool = False  #: one kernel traces and shades (render.trace includes shade)
 
@@ -174,9 +179,10 @@ class Renderer:
         self.block_sums = rt.buffer(4 * -(-cap // SCAN_BLOCK))
         self.counts = rt.buffer(4 * (MAX_DEPTH + 2))
         self.stats = rt.buffer(4 * STATS_LEN)
-        self._stats_host = np.zeros(STATS_LEN, np.uint32)  # last frame's, copied without a wait
-        self._stats_evt: cl.Event | None = None
-        self._levels = self._deepest = s.bounces
+        self._stats_reads = PinnedRing(rt, 4 * STATS_LEN, np.uint32, (STATS_LEN,), slots=3)
+        self._rgba_reads = PinnedRing(rt, 4 * self.n_pixels, np.uint8, (s.height, s.width, 4))
+        self._stats_handle: ReadHandle | None = None  # the last frame's counts (size hints)
+        self._levels = s.bounces
         self.framebuffer = rt.buffer(16 * self.n_pixels)
         self.rgba = rt.buffer(4 * self.n_pixels)
         self.aov = rt.buffer(AOV.itemsize * (self.n_pixels if s.aov else 1))
@@ -184,19 +190,16 @@ class Renderer:
         self.params_buf = rt.buffer(RENDERPARAMS.itemsize)
         self._camera = None
         self.ticket = rt.to_device(np.zeros(1, np.uint32))  # render_scan's last-block ticket
-        # this renderer's own kernel objects: raygen, and per depth level trace/shade/scan/gather
-        self._programs = {src: rt.program(src) for src in (
-            "render_raygen.cl", "render_trace.cl", "render_shade.cl", "render_secondary.cl",
-            "render_frame.cl")}
-        self.k_raygen = cl.Kernel(self._programs["render_raygen.cl"], "render_raygen")
-        self._k: list[dict[str, cl.Kernel]] = []
+        # this renderer's own kernels: raygen, and per depth level trace/shade/scan/gather
+        self.k_raygen = rt.kernel_launcher("render_raygen.cl", "render_raygen",
+                                           stage="render.raygen")
+        self._k: list[dict[str, Kernel]] = []
         self._bound_sig: tuple | None = None  # the buffers the kernels were bound to
-        self._vals: dict[tuple, int] = {}     # (kernel id, arg index) -> scalar it holds
         self._uploaded: tuple = (None, None)  # camera and params bytes on the device
         self._params_key = self._params_rec = None
         ls = s.local_size
 
-        self._count_hint: tuple | None = None  # rays per depth of the last frame that arrived
+        self._last_hint: tuple | None = None  # rays per depth of the last frame that arrived
         self._sizes: dict = {}
 
         def rnd(n: int) -> int:
@@ -213,7 +216,11 @@ class Renderer:
                 blocks = max(1, -(-launch_n // SCAN_BLOCK))
                 depths.append((rnd(launch_n), (blocks * SCAN_WG,), rnd(nq)))
                 launch_n = min(self.capacity, 2 * launch_n)
-            self._plan.append((q0, nq, n_rays, (max(n_rays, STATS_LEN),), depths))
+            raygen = np.array([(q0, n_rays, int(q0 == 0), 0)], RAYGEN_PARAMS)[0]
+            # per level: the GatherParams while scattering and on the last level (finish)
+            gather = (np.array([(1, q0, nq, 0)], GATHER_PARAMS)[0],
+                      np.array([(0, q0, nq, 1)], GATHER_PARAMS)[0])
+            self._plan.append((raygen, gather, (max(n_rays, STATS_LEN),), depths))
 
     def _launch_sizes(self, depths: list, hint: tuple | None) -> list:
         """Per depth level: (rays work-items, scan size, gather size scattering, gather size on
@@ -238,60 +245,62 @@ class Renderer:
         return sizes
 
     def _depth_kernels(self, depth: int) -> dict:
+        rt = self.rt
         while len(self._k) <= depth:
-            p = self._programs
-            self._k.append({"trace": cl.Kernel(p["render_trace.cl"], "render_trace"),
-                            "shade": cl.Kernel(p["render_shade.cl"], "render_shade"),
-                            "shadow": cl.Kernel(p["render_shade.cl"], "render_shadow"),
-                            "trace_shade": cl.Kernel(p["render_trace.cl"], "render_trace_shade"),
-                            "scan": cl.Kernel(p["render_secondary.cl"], "render_scan"),
-                            "gather": cl.Kernel(p["render_frame.cl"], "render_gather")})
+            d = len(self._k)
+            trace = "render.trace_secondary" if d else "render.trace"
+            self._k.append({
+                "trace": rt.kernel_launcher("render_trace.cl", "render_trace", stage=trace),
+                "trace_shade": rt.kernel_launcher("render_trace.cl", "render_trace_shade",
+                                                  stage=trace),
+                "shade": rt.kernel_launcher("render_shade.cl", "render_shade",
+                                            stage="render.shade"),
+                "shadow": rt.kernel_launcher("render_shade.cl", "render_shadow",
+                                             stage="render.shadow"),
+                "scan": rt.kernel_launcher("render_secondary.cl", "render_scan",
+                                           stage="render.secondary"),
+                "gather": rt.kernel_launcher("render_frame.cl", "render_gather",
+                                             stage="render.gather")})
             self._bound_sig = None
         return self._k[depth]
 
     def _bind(self, levels: int) -> None:
-        """Bind every kernel's arguments when the scene's buffers changed (a rebuild, new
-        tables) or a deeper level is needed; per-frame scalars go through :meth:`_set`."""
+        """Bind every kernel's arguments by name when the scene's buffers changed (a rebuild,
+        new tables) or a deeper level is needed; per-launch values are bound each frame as
+        GatherParams/RaygenParams records (set only when their bytes change)."""
         if self.scene.scene.layout != self.rt.bvh_layout:
             raise ValueError(f"the scene's BVH layout is {self.scene.scene.layout!r} but the "
                              f"renderer's kernels were built for {self.rt.bvh_layout!r}")
-        scene_args = tuple(self.scene.scene.trace_args())
-        geom = tuple(self.scene.shade_args())
-        bufs = scene_args + geom + (self.scene.light_buf,)
+        scene = self.scene.scene.trace_bindings()
+        geom = self.scene.shade_bindings()
+        bufs = (*scene.values(), *geom.values(), self.scene.light_buf)
         self._depth_kernels(levels)
         old = self._bound_sig
         if old is not None and len(old) == len(bufs) and all(
                 a is b for a, b in zip(old, bufs, strict=True)):
             return
-        u32 = np.uint32
         s = self.settings
-        self._vals.clear()
-        self.k_raygen.set_args(self.camera_buf, u32(0), u32(0), self.rays[0], self.counts,
-                               self.stats, u32(0))
+        self.k_raygen.bind(cam=self.camera_buf, rays=self.rays[0], counts=self.counts,
+                           stats=self.stats)
+        shading = {**geom, "prm": self.params_buf}
         for d, k in enumerate(self._k):
-            rays, out, dd = self.rays[d % 2], self.rays[(d + 1) % 2], u32(d)
-            k["trace"].set_args(*scene_args, rays, self.counts, dd, self.hits)
-            k["shade"].set_args(*geom, self.params_buf, self.camera_buf, rays, self.hits,
-                                self.counts, dd, self.radiance, self.child, self.aov, u32(s.aov))
-            k["trace_shade"].set_args(*scene_args, *geom, self.params_buf, self.camera_buf,
-                                      rays, self.counts, dd, self.hits, self.radiance,
-                                      self.child, self.aov, u32(s.aov))
-            k["shadow"].set_args(*scene_args, *geom, self.params_buf, self.scene.light_buf, rays,
-                                 self.hits, self.counts, dd, self.radiance)
-            k["scan"].set_args(self.child, self.counts, dd, u32(self.capacity), self.block_sums,
-                               self.ticket, self.stats)
-            k["gather"].set_args(*geom, self.params_buf, self.camera_buf, rays, self.hits,
-                                 self.counts, dd, self.child, self.block_sums, out, u32(0),
-                                 u32(0), u32(0), self.radiance, self.framebuffer, u32(0),
-                                 self.rgba)
+            wave = {"rays": self.rays[d % 2], "counts": self.counts, "depth": d}
+            k["trace"].bind(**scene, **wave, hits=self.hits)
+            out = {"radiance": self.radiance, "child_counts": self.child, "aov": self.aov,
+                   "write_aov": int(s.aov)}
+            k["shade"].bind(**shading, cam=self.camera_buf, **wave, hits=self.hits, **out)
+            k["trace_shade"].bind(**scene, **shading, cam=self.camera_buf, **wave,
+                                  hits=self.hits, **out)
+            k["shadow"].bind(**scene, **shading, lights=self.scene.light_buf, **wave,
+                             hits=self.hits, radiance=self.radiance)
+            k["scan"].bind(child_counts=self.child, counts=self.counts, depth=d,
+                           capacity=self.capacity, block_sums=self.block_sums,
+                           ticket=self.ticket, stats=self.stats)
+            k["gather"].bind(**shading, cam=self.camera_buf, **wave, hits=self.hits,
+                             child_offsets=self.child, block_sums=self.block_sums,
+                             out=self.rays[(d + 1) % 2], radiance=self.radiance,
+                             fb=self.framebuffer, rgba=self.rgba)
         self._bound_sig = bufs
-
-    def _set(self, kernel: cl.Kernel, index: int, value: int) -> None:
-        """Set a uint argument only when it differs from the value the kernel holds."""
-        key = (id(kernel), index)
-        if self._vals.get(key, 0) != value:
-            kernel.set_arg(index, np.uint32(value))
-            self._vals[key] = value
 
     # -- inputs -----------------------------------------------------------------------------
     def set_camera(self, eye, target, up=(0.0, 1.0, 0.0), fov: float = 60.0) -> None:
@@ -341,50 +350,60 @@ class Renderer:
 
     # -- the frame ----------------------------------------------------------------------------
     def enqueue_frame(self, *, update_scene: bool = True) -> None:
-        """Queue one frame (scene update, all chunks, tonemap). No host sync."""
-        rt, s, q = self.rt, self.settings, self.rt.queue
+        """Queue one frame (scene update, all chunks, tonemap). No host sync.
+
+        Every depth level up to ``bounces`` is launched whatever the last frame needed, so a
+        frame's picture depends only on the scene and camera (per-ray kernels grid-stride over
+        the device-side count: an empty level costs a few bare launches). The last frame's ray
+        counts, when they have arrived, only size the launches."""
+        s, q = self.settings, self.rt.queue
         if update_scene:
             self.scene.update()
         self._upload_inputs()
         # no material reflects or refracts: no secondary wavefront can exist, launch none
         deepest = s.bounces if self.scene.has_secondary else 0
-        bounces = min(deepest, self._level_hint()) if s.adaptive_depth else deepest
-        self._levels, self._deepest = bounces, deepest
-        self._bind(bounces)
-        ks, setv, record, enqueue = self._k, self._set, rt.timer.record, cl.enqueue_nd_range_kernel
+        self._levels = deepest
+        self._bind(deepest)
+        ks = self._k
         ls = (s.local_size,)
         scan_ls = (SCAN_WG,)
         has_lights = len(self.scene.lights) > 0
         fused = s.fuse_trace_shade
-        hint = self._count_hint if len(self._plan) == 1 else None
-        for q0, nq, n_rays, raygen_size, depths in self._plan:
+        hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
+        raygen = self.k_raygen
+        for rp, (gather_scatter, gather_finish), raygen_size, depths in self._plan:
             sizes = self._launch_sizes(depths, hint)
-            setv(self.k_raygen, 1, q0)
-            setv(self.k_raygen, 2, n_rays)
-            setv(self.k_raygen, 6, int(q0 == 0))
-            record("render.raygen", enqueue(q, self.k_raygen, raygen_size, None))
-            for depth in range(bounces + 1):
+            raygen.bind(rp=rp)
+            raygen.enqueue(raygen_size)
+            for depth in range(deepest + 1):
                 k = ks[depth]
                 ray_size, scan_size, scatter_size, pixel_size = sizes[depth]
-                record("render.trace_secondary" if depth else "render.trace",
-                       enqueue(q, k["trace_shade" if fused else "trace"], ray_size, ls))
-                if depth == 0 and q0 == 0:
+                k["trace_shade" if fused else "trace"].enqueue(ray_size, ls)
+                if depth == 0 and rp["zero_stats"]:
                     q.flush()  # the device starts while the rest is enqueued
                 if not fused:
-                    record("render.shade", enqueue(q, k["shade"], ray_size, ls))
+                    k["shade"].enqueue(ray_size, ls)
                 if has_lights:
-                    record("render.shadow", enqueue(q, k["shadow"], ray_size, ls))
-                if depth < deepest:  # the last launched level still counts its children
-                    record("render.secondary", enqueue(q, k["scan"], scan_size, scan_ls))
+                    k["shadow"].enqueue(ray_size, ls)
                 g = k["gather"]
-                scatter = depth < bounces
-                setv(g, 19, int(scatter))
-                setv(g, 24, int(not scatter))
-                setv(g, 20, q0)
-                setv(g, 21, nq)
-                record("render.gather", enqueue(q, g, scatter_size if scatter else pixel_size,
-                                                ls))
-        self._stats_evt = cl.enqueue_copy(q, self._stats_host, self.stats, is_blocking=False)
+                if depth < deepest:
+                    k["scan"].enqueue(scan_size, scan_ls)
+                    g.bind(gp=gather_scatter)
+                    g.enqueue(scatter_size, ls)
+                else:
+                    g.bind(gp=gather_finish)
+                    g.enqueue(pixel_size, ls)
+        self._stats_handle = self.enqueue_read_stats()
+
+    def _count_hint(self) -> tuple | None:
+        """Rays per depth of the last frame whose counts have arrived (never waits)."""
+        h = self._stats_handle
+        if h is None or not h.ready():
+            return self._last_hint
+        st = h.array
+        self._last_hint = tuple(int(x) for x in st[: self.settings.bounces + 1]) \
+            if h.valid else None
+        return self._last_hint
 
     def _upload_inputs(self) -> None:
         """Copy the camera and the RenderParams record to the device when they changed."""
@@ -402,17 +421,34 @@ class Renderer:
             cl.enqueue_copy(q, self.params_buf, np.frombuffer(prm, np.uint8), is_blocking=False)
         self._uploaded = (cam, prm)
 
-    def _level_hint(self) -> int:
-        """Depth levels to launch: the deepest level with rays in the last frame whose counts
-        have arrived (never waits; all levels before any has). The last launched level records
-        the children it could not trace, so a scene that needs one level more gets it in the
-        next frame (for one frame those rays are missing: read_stats()['untraced'])."""
-        evt = self._stats_evt
-        if evt is None or evt.command_execution_status != cl.command_execution_status.COMPLETE:
-            return self.settings.bounces if evt is None else self._levels
-        self._count_hint = tuple(int(x) for x in self._stats_host[: self.settings.bounces + 1])
-        deep = [d for d in range(1, self.settings.bounces + 1) if self._stats_host[d] > 0]
-        return max(deep, default=0)
+    # -- non-blocking reads -------------------------------------------------------------------
+    def enqueue_read_rgba(self) -> ReadHandle:
+        """Queue a copy of the last enqueued frame's RGBA8 image into pinned host memory; no
+        wait. ``handle.wait()`` (or ``handle.event`` then ``handle.array``) gives the
+        (height, width, 4) image; two reads may be in flight, a third reuses the first's memory
+        (its handle then refuses to read)."""
+        return self._rgba_reads.enqueue_read(self.rt.queue, self.rgba)
+
+    def enqueue_read_stats(self) -> ReadHandle:
+        """Queue a copy of the last enqueued frame's ray counts (STATS_LEN uint32: rays per
+        depth, [STAT_DROPPED] children dropped) into pinned host memory; no wait.
+        :meth:`enqueue_frame` already queues one per frame: :attr:`stats_handle`."""
+        return self._stats_reads.enqueue_read(self.rt.queue, self.stats)
+
+    @property
+    def stats_handle(self) -> ReadHandle | None:
+        """The ray-count read queued with the last frame (read it a frame late: no wait)."""
+        return self._stats_handle
+
+    def stats_from(self, counts: np.ndarray) -> dict:
+        """:meth:`read_stats`'s dictionary from a stats array (e.g. ``stats_handle.wait()``)."""
+        st = np.asarray(counts)
+        L = self._levels
+        per_depth = [int(x) for x in st[: L + 1]]
+        if L == 0 and not self.scene.has_secondary:  # no scan ran: the chunks' primary rays
+            per_depth = [sum(nq * self.settings.spp for _, nq in self.chunks)]
+        return {"rays_per_depth": per_depth, "dropped": int(st[STAT_DROPPED]),
+                "secondary_rays": int(sum(per_depth[1:])), "levels": L}
 
     # -- outputs (each one synchronises) ------------------------------------------------------
     def read_rgba(self) -> np.ndarray:
@@ -443,14 +479,7 @@ class Renderer:
 
     def read_stats(self) -> dict:
         """Rays traced per depth over the last frame and children dropped (wavefront full)."""
-        st = self.rt.to_host(self.stats, np.uint32, STATS_LEN)
-        L = self._levels
-        per_depth = [int(x) for x in st[: L + 1]]
-        if self._deepest == 0:  # no scan ran: the primary count is the chunks' sum
-            per_depth = [sum(nq * self.settings.spp for _, nq in self.chunks)]
-        untraced = int(st[L + 1]) if L < self._deepest else 0
-        return {"rays_per_depth": per_depth, "dropped": int(st[STAT_DROPPED]),
-                "secondary_rays": int(sum(per_depth[1:])), "levels": L, "untraced": untraced}
+        return self.stats_from(self.rt.to_host(self.stats, np.uint32, STATS_LEN))
 
     def memory_report(self) -> dict:
         """Device bytes per ray slot and per primary ray, and per triangle of the scene."""

@@ -367,9 +367,14 @@ class RenderScene:
 
     def shade_args(self) -> list:
         """Buffers for ``RENDER_GEOM_PARAMS`` in order; valid after :meth:`update`."""
-        return [self.instance_buf, self.mesh_info, self.positions, self.normals, self.uvs,
-                self.triangles, self.tri_materials, self.material_buf, self.texinfo_buf,
-                self.texel_buf]
+        return list(self.shade_bindings().values())
+
+    def shade_bindings(self) -> dict:
+        """``RENDER_GEOM_PARAMS`` (kernels/render_surface.h) by name, for ``Kernel.bind``."""
+        return {"g_inst": self.instance_buf, "g_mesh": self.mesh_info, "g_pos": self.positions,
+                "g_nrm": self.normals, "g_uv": self.uvs, "g_tri": self.triangles,
+                "g_tri_mat": self.tri_materials, "g_mat": self.material_buf,
+                "g_tex": self.texinfo_buf, "g_texels": self.texel_buf}
 
     def tables(self) -> dict:
         """Host copies for the float64 reference (dynamic meshes are read back: test use only)."""

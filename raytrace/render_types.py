@@ -107,6 +107,12 @@ RENDERPARAMS = np.dtype([("ambient", f4), ("sky_zenith", f4), ("sky_horizon", f4
 AOV = np.dtype([("normal", f4), ("depth", np.float32), ("prim", np.int32), ("inst", np.int32),
                 ("material", np.int32)])
 
+#: render_raygen's and render_gather's per-launch values (by value, 16 bytes each).
+RAYGEN_PARAMS = np.dtype([("q0", np.uint32), ("n_rays", np.uint32), ("zero_stats", np.uint32),
+                          ("pad", np.uint32)])
+GATHER_PARAMS = np.dtype([("scatter", np.uint32), ("q0", np.uint32), ("n_q", np.uint32),
+                          ("finish", np.uint32)])
+
 MESH_HAS_NORMALS = 1
 MESH_HAS_UVS = 2
 MESH_TRI_MATERIALS = 4
@@ -122,4 +128,6 @@ STRUCTS = [
     ("render_types.h", "InstanceInfo", INSTANCEINFO),
     ("render_types.h", "RenderParams", RENDERPARAMS),
     ("render_types.h", "Aov", AOV),
+    ("render_types.h", "RaygenParams", RAYGEN_PARAMS),
+    ("render_types.h", "GatherParams", GATHER_PARAMS),
 ]

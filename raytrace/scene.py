@@ -29,7 +29,7 @@ from raytrace.bvh import (
     vertices_to_float4,
 )
 from raytrace.bvh_wide import DEFAULT_WIDE_LEAF_SIZE, WideStorage
-from raytrace.sort import Launch, make_sorter
+from raytrace.sort import make_sorter
 
 TLAS_LEAF_SIZE = 1
 TRACE_STATS_LEN = 4
@@ -85,7 +85,7 @@ class Scene:
         scene.update()                 # first call builds everything
         ...                            # each frame:
         scene.set_transform(b, M); scene.update()   # refit water, rebuild the TLAS
-        kernel.set_args(*scene.trace_args(), ...)
+        kernel.bind(**scene.trace_bindings(), ...)
     """
 
     def __init__(self, rt: Runtime, *, leaf_size: int | None = None, layout: str | None = None,
@@ -103,9 +103,9 @@ class Scene:
         self.trace_stats = rt.buffer(4 * TRACE_STATS_LEN)
         cl.enqueue_fill_buffer(rt.queue, self.trace_stats, np.int32(0), 0, 4 * TRACE_STATS_LEN)
         self.tlas_info = rt.buffer(INFO_DTYPE.itemsize)
-        self._k_reset = cl.Kernel(rt.program("bvh_build.cl"), "bvh_reset_info")
-        self._k_reset.set_args(self.tlas_info, np.int32(0), np.int32(0))
-        self._reset = Launch(rt, f"{stage}.tlas.reset", self._k_reset, 1)
+        self._reset = rt.kernel_launcher("bvh_build.cl", "bvh_reset_info",
+                                         stage=f"{stage}.tlas.reset")
+        self._reset.bind(infos=self.tlas_info, info_index=0, n_prims=0).set_size(1)
         self._init_empty_tlas()
 
     # -- content ---------------------------------------------------------------------------
@@ -255,32 +255,31 @@ class Scene:
         self._tlas_boxes = rt.buffer(32 * n)
         self._xforms_dev = rt.buffer(48 * n)
         self._inst_mesh_dev = rt.to_device(np.array(self._inst_mesh, np.int32))
-        prg = rt.program("bvh_tlas.cl")
-        self._k_prep = cl.Kernel(prg, "tlas_prep")
-        self._k_prep.set_args(np.int32(n), self._xforms_dev, self._inst_mesh_dev,
-                              self.mesh_prim_base, self.blas_infos, self.mesh_wide_root,
-                              np.int32(self.wide), self.instances,
-                              self._tlas_boxes, self.tlas_info)
-        self._k_morton = cl.Kernel(prg, "bvh_box_morton")
-        self._k_morton.set_args(np.int32(n), self._tlas_boxes, self.tlas_info, np.int32(32),
-                                self._tlas_keys, self.tlas_prims)
-        self._k_hier = cl.Kernel(prg, "bvh_hierarchy_boxes")
-        self._k_hier.set_args(np.int32(n), np.int32(TLAS_LEAF_SIZE), self._tlas_keys,
-                              self.tlas_prims, self._tlas_boxes, self.tlas_nodes,
-                              self._tlas_flags, self.tlas_info)
-        self._tlas_sorter = make_sorter(rt, self._tlas_keys, self.tlas_prims, n,
-                                        stage=f"{self.stage}.tlas.sort")
         st = f"{self.stage}.tlas"
-        self._prep = Launch(rt, f"{st}.prep", self._k_prep, n, BOUNDS_WG)
-        self._morton = Launch(rt, f"{st}.morton", self._k_morton, n, 64)
-        self._hier = Launch(rt, f"{st}.hierarchy", self._k_hier, n, 64)
+
+        def kernel(name, stage):
+            return rt.kernel_launcher("bvh_tlas.cl", name, stage=f"{st}.{stage}")
+
+        self._prep = kernel("tlas_prep", "prep").bind(
+            n_inst=n, xforms=self._xforms_dev, inst_mesh=self._inst_mesh_dev,
+            mesh_prim_base=self.mesh_prim_base, blas_infos=self.blas_infos,
+            mesh_wide_root=self.mesh_wide_root, wide=int(self.wide), instances=self.instances,
+            boxes=self._tlas_boxes, tlas_info=self.tlas_info).set_size(n, BOUNDS_WG)
+        self._morton = kernel("bvh_box_morton", "morton").bind(
+            n=n, boxes=self._tlas_boxes, info=self.tlas_info, key_bits=32,
+            keys=self._tlas_keys, vals=self.tlas_prims).set_size(n, 64)
+        self._hier = kernel("bvh_hierarchy_boxes", "hierarchy").bind(
+            n=n, leaf_size=TLAS_LEAF_SIZE, keys=self._tlas_keys, order=self.tlas_prims,
+            boxes=self._tlas_boxes, nodes=self.tlas_nodes, flags=self._tlas_flags,
+            info=self.tlas_info).set_size(n, 64)
+        self._tlas_sorter = make_sorter(rt, self._tlas_keys, self.tlas_prims, n,
+                                        stage=f"{st}.sort")
         self._tlas_n = n
         self._xforms_dirty = True
 
     def _build_tlas(self) -> None:
         rt, n, st = self.rt, self.n_instances, f"{self.stage}.tlas"
-        if n != self._tlas_n:
-            self._k_reset.set_arg(2, np.int32(n))
+        self._reset.bind(n_prims=n)
         self._reset()  # root = -1: an empty scene misses
         if n == 0:
             return
@@ -300,8 +299,14 @@ class Scene:
     # -- kernels' view ----------------------------------------------------------------------
     def trace_args(self) -> list:
         """Buffers for ``SCENE_PARAMS`` (kernels/scene.h), in order; valid after update()."""
-        return [self.tlas_info, self.tlas_nodes, self.tlas_prims, self.instances,
-                *self._trace_blas, self.trace_stats]
+        return list(self.trace_bindings().values())
+
+    def trace_bindings(self) -> dict:
+        """``SCENE_PARAMS`` by name, for ``Kernel.bind(**scene.trace_bindings())``."""
+        return {"tlas_info": self.tlas_info, "tlas_nodes": self.tlas_nodes,
+                "tlas_prims": self.tlas_prims, "instances": self.instances,
+                "blas_nodes": self._trace_blas[0], "blas_tris": self._trace_blas[1],
+                "trace_stats": self.trace_stats}
 
     def check(self) -> dict:
         """Read the device's guards (synchronises): raise ValueError on non-finite vertices or a

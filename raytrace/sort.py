@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import enum
 
-import numpy as np
 import pyopencl as cl
 
 from kernels.runtime import Runtime
@@ -30,31 +29,6 @@ LOCAL_MAX = 2048
 LOCAL_WG = 256
 #: Up to this many tiles the scatter sums the tile counts itself (no scan launch).
 FUSED_SCAN_MAX_TILES = 256
-
-
-class Launch:
-    """One launch prepared once: a kernel with its arguments bound, its sizes and its stage name.
-
-    Calling it enqueues the kernel and records the event under the stage in ``rt.timer`` (the
-    contract of ``Runtime.launch`` without its per-call size conversions: a BVH build is some
-    dozen launches or more, and at small sizes their host cost is what the wall clock shows).
-    """
-
-    __slots__ = ("rt", "stage", "kernel", "global_size", "local_size")
-
-    def __init__(self, rt: Runtime, stage: str, kernel: cl.Kernel, global_size: int,
-                 local_size: int | None = None):
-        self.rt, self.stage, self.kernel = rt, stage, kernel
-        gs = max(int(global_size), 1)
-        if local_size is not None:
-            gs = -(-gs // int(local_size)) * int(local_size)
-        self.global_size = (gs,)
-        self.local_size = None if local_size is None else (int(local_size),)
-
-    def __call__(self, wait_for=None) -> cl.Event:
-        evt = cl.enqueue_nd_range_kernel(self.rt.queue, self.kernel, self.global_size,
-                                         self.local_size, wait_for=wait_for)
-        return self.rt.timer.record(self.stage, evt)
 
 
 class SortMethod(enum.IntEnum):
@@ -81,9 +55,8 @@ class LocalSorter:
         if not 0 <= n <= LOCAL_MAX:
             raise ValueError(f"LocalSorter sorts at most {LOCAL_MAX} pairs, got n={n}")
         self.rt, self.n, self.stage = rt, int(n), stage
-        k = cl.Kernel(rt.program("sort_local.cl"), "sort_local_pairs")
-        k.set_args(np.uint32(n), keys, vals)
-        self._launch = Launch(rt, stage, k, LOCAL_WG, LOCAL_WG)
+        self._launch = rt.kernel_launcher("sort_local.cl", "sort_local_pairs", stage=stage)
+        self._launch.bind(n=n, keys=keys, vals=vals).set_size(LOCAL_WG, LOCAL_WG)
 
     def enqueue(self) -> None:
         if self.n > 1:
@@ -129,25 +102,27 @@ class RadixSorter:
         self._counts = rt.buffer(4 * n_counts)
         # one work-group scans all tile counts: as wide as the device allows on a GPU
         self.scan_wg = SCAN_WG if not rt.is_gpu else min(1024, rt.device.max_work_group_size)
-        prg = rt.program("sort_radix.cl", {"SCAN_WG": self.scan_wg,
-                                           "RADIX_BITS": self.radix_bits})
+        defines = {"SCAN_WG": self.scan_wg, "RADIX_BITS": self.radix_bits}
+
+        def kernel(name):
+            return rt.kernel_launcher("sort_radix.cl", name, stage=stage, defines=defines)
+
         self.fused_scan = self.n_tiles <= FUSED_SCAN_MAX_TILES
-        scan = cl.Kernel(prg, "radix_scan")
-        scan.set_args(np.uint32(n_counts), self._counts)
-        self._scan = Launch(rt, stage, scan, self.scan_wg, self.scan_wg)
+        self._scan = kernel("radix_scan").bind(len=n_counts, counts=self._counts)
+        self._scan.set_size(self.scan_wg, self.scan_wg)
         self._passes = []
         gs = self.n_tiles * RADIX_WG
         src = (keys, vals)
         dst = (self._alt_keys, self._alt_vals)
         for p in range(self.passes):
-            shift = np.uint32(self.radix_bits * p)
-            hist = cl.Kernel(prg, "radix_histogram")
-            hist.set_args(np.uint32(self.n), shift, src[0], self._counts, np.uint32(self.n_tiles))
-            scat = cl.Kernel(prg, "radix_scatter")
-            scat.set_args(np.uint32(self.n), shift, src[0], src[1], dst[0], dst[1], self._counts,
-                          np.uint32(self.n_tiles), np.uint32(self.fused_scan))
-            self._passes.append((Launch(rt, stage, hist, gs, RADIX_WG),
-                                 Launch(rt, stage, scat, gs, RADIX_WG)))
+            shift = self.radix_bits * p
+            hist = kernel("radix_histogram").bind(n=self.n, shift=shift, keys=src[0],
+                                                  counts=self._counts, n_tiles=self.n_tiles)
+            scat = kernel("radix_scatter").bind(
+                n=self.n, shift=shift, keys_in=src[0], vals_in=src[1], keys_out=dst[0],
+                vals_out=dst[1], offsets=self._counts, n_tiles=self.n_tiles,
+                fused=int(self.fused_scan))
+            self._passes.append((hist.set_size(gs, RADIX_WG), scat.set_size(gs, RADIX_WG)))
             src, dst = dst, src
         self._result_in_alt = self.passes % 2 == 1
 

@@ -84,10 +84,10 @@ file = "bunny_5k.obj"
 material = "red"
 rotation = [0, 90, 0]
 """, tmp_path)
-    assert s.extra["shading"].fresnel == "schlick"
-    assert s.extra["lights"][0].kind == "spot"
-    assert s.extra["materials"]["red"].diffuse == (1.0, 0.0, 0.0)
-    assert s.extra["meshes"][0].file.name == "bunny_5k.obj"
+    assert s.shading.fresnel == "schlick"
+    assert s.lights[0].kind == "spot"
+    assert s.materials["red"].diffuse == (1.0, 0.0, 0.0)
+    assert s.meshes[0].file.name == "bunny_5k.obj"
     check_material_names(s)
 
 

@@ -45,8 +45,8 @@ def test_kernel_lookup_is_cached_and_copy_is_exact(rt):
     src = np.random.default_rng(0).random(64 * 4, dtype=np.float32)
     d_src = rt.to_device(src)
     d_dst = rt.buffer(src.nbytes)
-    k1.set_args(d_src, d_dst, np.uint32(64))
-    rt.launch("test.copy", k1, 64, 16)
+    rt.kernel_launcher("bandwidth.cl", "copy_float4", stage="test.copy").bind(
+        src=d_src, dst=d_dst, n=64).launch(64, 16)
     assert np.array_equal(rt.to_host(d_dst, np.float32, src.size), src)
     times = rt.timer.collect()
     assert set(times) == {"test.copy"} and times["test.copy"] >= 0

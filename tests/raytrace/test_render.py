@@ -2,6 +2,7 @@
 the Fresnel equations in float64, raytrace.intersect for primary hits, analytic lighting."""
 
 import numpy as np
+import pyopencl as cl
 import pytest
 
 from raytrace import render_reference as ref
@@ -244,25 +245,24 @@ def test_shadow_rays_do_not_hit_their_own_surface(rt):
     np.testing.assert_allclose(fb[hit], lit_ref[hit], rtol=1e-4)
 
 
-def test_adaptive_depth_launches_only_needed_levels_and_matches(rt):
-    """After the first frame only the levels the scene needs run; the image is unchanged."""
+def test_every_level_is_launched_and_size_hints_never_change_the_image(rt):
+    """All levels up to bounces run in every frame (the first one included); sizing launches
+    from the last frame's counts gives the same image as full-size launches."""
     sc = tiny_scene(rt)
-    full = Renderer(rt, sc, RenderSettings(width=24, height=16, bounces=12,
-                                           adaptive_depth=False))
-    adapt = Renderer(rt, sc, RenderSettings(width=24, height=16, bounces=12))
-    for r in (full, adapt):
+    full = Renderer(rt, sc, RenderSettings(width=24, height=16, bounces=12, size_hints=False))
+    hinted = Renderer(rt, sc, RenderSettings(width=24, height=16, bounces=12))
+    for r in (full, hinted):
         r.set_camera((0.5, 1.5, 3.0), (0, 0.3, 0), (0, 1, 0), 50)
     full.render()
     ref_fb = full.read_framebuffer()
     per_depth = full.read_stats()["rays_per_depth"]
-    needed = max(d for d, n in enumerate(per_depth) if n > 0)
-    assert needed < 12
-    for frame in range(2):
-        adapt.render()
-        st = adapt.read_stats()
-        assert st["levels"] == (12 if frame == 0 else needed)
-        assert st["untraced"] == 0
-        np.testing.assert_array_equal(adapt.read_framebuffer(), ref_fb)
+    assert len(per_depth) == 13 and 0 < max(d for d, n in enumerate(per_depth) if n > 0) < 12
+    for _ in range(3):
+        hinted.render()
+        st = hinted.read_stats()
+        assert st["levels"] == 12 and st["rays_per_depth"] == per_depth
+        np.testing.assert_array_equal(hinted.read_framebuffer(), ref_fb)
+    assert hinted._last_hint is not None and hinted._last_hint[0] == per_depth[0]
 
 
 def test_multi_block_compaction_equals_small_chunks(rt):
@@ -271,7 +271,7 @@ def test_multi_block_compaction_equals_small_chunks(rt):
     from raytrace.render_types import SCAN_BLOCK
 
     sc = tiny_scene(rt)
-    kw = dict(width=40, height=32, spp=4, bounces=2, adaptive_depth=False)
+    kw = dict(width=40, height=32, spp=4, bounces=2, size_hints=False)
     whole = Renderer(rt, sc, RenderSettings(**kw))
     small = Renderer(rt, sc, RenderSettings(**kw, max_chunk_rays=256))
     for r in (whole, small):
@@ -292,8 +292,8 @@ def test_multi_block_compaction_equals_small_chunks(rt):
     np.testing.assert_array_equal(whole.read_rgba(), small.read_rgba())
     # launched for far fewer work-items than rays (a stale count hint): the grid-stride loops
     # still trace, shade and gather every ray
-    whole._count_hint = (0, 0, 0)
-    sizes = whole._launch_sizes(whole._plan[0][4], whole._count_hint)
+    whole._last_hint = (0, 0, 0)
+    sizes = whole._launch_sizes(whole._plan[0][3], whole._last_hint)
     assert sizes[1][0][0] < counts[1]
     whole.render()
     np.testing.assert_array_equal(whole.read_framebuffer(), fb)
@@ -304,11 +304,10 @@ def test_multi_block_compaction_equals_small_chunks(rt):
 def test_scan_kernel_offsets_counts_and_stats(rt, n):
     """render_scan in one launch: exclusive offsets (block offset + offset in block) equal
     NumPy's cumulative sum, the total becomes the next count and the stats, the ticket is 0."""
-    import pyopencl as cl
 
     from raytrace.render_types import SCAN_BLOCK, SCAN_WG, STATS_LEN
 
-    k = cl.Kernel(rt.program("render_secondary.cl"), "render_scan")
+    k = rt.kernel_launcher("render_secondary.cl", "render_scan", stage="test.scan")
     cc = np.random.default_rng(n).integers(0, 3, max(n, 1)).astype(np.uint32)
     child = rt.to_device(cc)
     counts = rt.to_device(np.array([n, 0, 0], np.uint32))
@@ -317,8 +316,9 @@ def test_scan_kernel_offsets_counts_and_stats(rt, n):
     ticket = rt.to_device(np.zeros(1, np.uint32))
     stats = rt.to_device(np.zeros(STATS_LEN, np.uint32))
     total = int(cc[:n].sum())
-    k.set_args(child, counts, np.uint32(0), np.uint32(max(total - 3, 0)), sums, ticket, stats)
-    cl.enqueue_nd_range_kernel(rt.queue, k, ((blocks + 1) * SCAN_WG,), (SCAN_WG,))
+    k.bind(child_counts=child, counts=counts, depth=0, capacity=max(total - 3, 0),
+           block_sums=sums, ticket=ticket, stats=stats)
+    k.launch((blocks + 1) * SCAN_WG, SCAN_WG)
     off = rt.to_host(child, np.uint32, max(n, 1))[:n].astype(np.int64)
     off += rt.to_host(sums, np.uint32, blocks)[np.arange(n) // SCAN_BLOCK]
     np.testing.assert_array_equal(off, np.cumsum(cc[:n], dtype=np.int64) - cc[:n])
@@ -327,3 +327,58 @@ def test_scan_kernel_offsets_counts_and_stats(rt, n):
     st = rt.to_host(stats, np.uint32, STATS_LEN)
     assert (st[0], st[1], st[-1]) == (n, kept, total - kept)
     assert rt.to_host(ticket, np.uint32, 1)[0] == 0
+
+
+CAMERAS = [((0.0, 1.0, 3.0), (0.0, 0.0, 6.0)),   # the floor and sky only: no secondary rays
+           ((0.5, 1.5, 3.0), (0.0, 0.3, 0.0)),   # the glass box and the mirror appear
+           ((-1.0, 1.2, 2.5), (0.0, 0.4, -0.5))]
+
+
+def test_frame_does_not_depend_on_the_previous_frame(rt):
+    """A frame rendered by a fresh renderer equals the same frame inside a sequence, byte for
+    byte, including the frame where reflections and refractions first appear."""
+    sc = tiny_scene(rt)
+    kw = dict(width=24, height=16, bounces=4)
+    seq = Renderer(rt, sc, RenderSettings(**kw))
+    frames = []
+    for eye, target in CAMERAS:
+        seq.set_camera(eye, target, (0, 1, 0), 50)
+        seq.enqueue_frame()
+        frames.append((seq.read_rgba(), seq.read_stats()))
+    assert frames[0][1]["secondary_rays"] == 0 and frames[1][1]["secondary_rays"] > 0
+    for (eye, target), (rgba, stats) in zip(CAMERAS, frames, strict=True):
+        alone = Renderer(rt, sc, RenderSettings(**kw))
+        alone.set_camera(eye, target, (0, 1, 0), 50)
+        alone.enqueue_frame()
+        assert alone.read_stats() == stats
+        np.testing.assert_array_equal(alone.read_rgba(), rgba)
+
+
+def test_non_blocking_reads_two_in_flight(rt):
+    """enqueue_read_rgba/enqueue_read_stats copy into pinned memory without a wait; two images
+    in flight each hold their own frame; a third read reuses the first's slot, whose handle
+    then refuses to read."""
+    from kernels.pinned import StaleReadError
+
+    sc = tiny_scene(rt)
+    r = Renderer(rt, sc, RenderSettings(width=24, height=16, bounces=3))
+    want = []
+    for eye, target in CAMERAS[1:]:  # the blocking path, frame by frame
+        r.set_camera(eye, target, (0, 1, 0), 50)
+        r.enqueue_frame()
+        want.append((r.read_rgba().copy(), r.read_stats()))
+    handles = []
+    for eye, target in CAMERAS[1:]:  # two frames in flight, nothing waited on
+        r.set_camera(eye, target, (0, 1, 0), 50)
+        r.enqueue_frame()
+        handles.append((r.enqueue_read_rgba(), r.stats_handle))
+    assert not np.array_equal(want[0][0], want[1][0])
+    for (h_img, h_stats), (img, stats) in zip(handles, want, strict=True):
+        assert h_img.array.shape == (16, 24, 4) and isinstance(h_img.event, cl.Event)
+        np.testing.assert_array_equal(h_img.wait(), img)
+        assert r.stats_from(h_stats.wait()) == stats
+    r.enqueue_read_rgba()  # a third read reuses the first one's slot
+    with pytest.raises(StaleReadError, match="reused"):
+        handles[0][0].wait()
+    np.testing.assert_array_equal(handles[1][0].wait(), want[1][0])
+    assert r.stats_from(r.enqueue_read_stats().wait()) == want[1][1]
