@@ -193,23 +193,12 @@ class Requests:
 @dataclasses.dataclass
 class Water:
     """Where the water lies: pool corner ``origin`` (world m, bed level), ``size`` (x, z extent,
-    m), still ``depth`` (m), and ``dx`` (m per cell): what picking and drops need."""
+    m), still ``depth`` (m), and ``dx`` (m per cell): what ripples are sized by."""
 
     origin: tuple
     size: tuple
     depth: float
     dx: float
-
-    def pool_point(self, p) -> tuple[float, float] | None:
-        """Pool coordinates (x, y) in m of world point ``p`` if it lies on the water (inside the
-        pool and not far above the still level), else None."""
-        x, z = p[0] - self.origin[0], p[2] - self.origin[2]
-        lx, ly = self.size
-        if not (0.0 <= x <= lx and 0.0 <= z <= ly):
-            return None
-        if p[1] - self.origin[1] > self.depth * 1.25 + 2 * self.dx:
-            return None
-        return float(x), float(z)
 
 
 class Controls:
@@ -250,10 +239,11 @@ class Controls:
         return x * iw / max(1, ww), y * ih / max(1, wh)
 
     def _pick_pool(self, world, x: float, y: float):
+        """Pool coordinates (m) of the water under window pixel (x, y), or None."""
         if self.water is None:
             return None
         p = world.pick(*self.image_point(x, y))
-        return None if p is None else self.water.pool_point(p)
+        return p.pool_xy if p is not None and p.water else None
 
     # -- events (the same calls live input and replay make) ---------------------------------
     def mouse_button(self, world, button: Button, pressed: bool, shift: bool = False) -> None:

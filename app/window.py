@@ -112,22 +112,12 @@ def require_display() -> None:
 
 
 # ---- worlds -------------------------------------------------------------------------------------
-def world_class():
-    """app.world.World where it offers the frame API, else the temporary adapter."""
+def make_world(scene, device, *, size, spp, bounces, cells):
+    """The World the window drives (docs/frame_api.md), ``cells`` along the pool's longer side."""
     from app.world import World
 
-    if hasattr(World, "pick"):
-        return World
-    from app._world_compat import CompatWorld
-    return CompatWorld
-
-
-def make_world(scene, device, *, size, spp, bounces, cells):
-    from app.quality import grid_for
-
-    grid = None if cells is None or scene.water is None else grid_for(scene.water.size, cells)
-    return world_class()(scene, device, width=size[0], height=size[1], spp=spp,
-                         bounces=bounces, cells=grid)
+    return World(scene, device, width=size[0], height=size[1], spp=spp, bounces=bounces,
+                 cells=None if scene.water is None else cells)
 
 
 def display_path(rt) -> str:
@@ -140,13 +130,13 @@ def display_path(rt) -> str:
 
 
 def water_of(scene, cells: int | None) -> Water | None:
-    from app.quality import grid_for
+    """The water as the World lays it out with ``cells`` along its longer side."""
+    from app.assemble import water_spec
 
-    w = scene.water
+    w = water_spec(scene, cells)
     if w is None:
         return None
-    nx, _ = grid_for(w.size, cells) if cells else w.cells
-    return Water(tuple(w.origin), tuple(w.size), float(w.depth), float(w.size[0]) / nx)
+    return Water(tuple(w.origin), tuple(w.size), float(w.depth), float(w.size[0]) / w.cells[0])
 
 
 def decide_quality(args, scene, rt, window_size, frame_seconds):
@@ -172,7 +162,7 @@ def decide_quality(args, scene, rt, window_size, frame_seconds):
                        cells=probe_cells)
     stats, wall_ms = q.measure(world, frame_seconds)
     world.close()
-    nx, ny = q.grid_for(water.size, probe_cells)
+    nx, ny = stats[-1].water_cells
     steps = sum(s.lbm_steps for s in stats) / len(stats)
     costs = q.costs_from_stats(stats, wall_ms, n_cells=nx * ny, steps=steps)
     return q.choose(costs, target_fps=args.target_fps, window=window_size, max_cells=max_cells,
@@ -376,6 +366,47 @@ KEYMAP = {
 }
 
 
+def _open_window(glfw, size, title, visible):
+    """A GL 3.3 core window: an EGL context first on Linux (so a headless EGL context can live in
+    the same process, as in the tests and `bench window`; GLX and EGL contexts of one thread
+    clash under libglvnd), else the platform's native one."""
+    apis = [glfw.NATIVE_CONTEXT_API]
+    if sys.platform.startswith("linux"):
+        apis.insert(0, glfw.EGL_CONTEXT_API)
+    for api in apis:
+        glfw.default_window_hints()
+        for hint, value in ((glfw.CONTEXT_VERSION_MAJOR, 3), (glfw.CONTEXT_VERSION_MINOR, 3),
+                            (glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE),
+                            (glfw.OPENGL_FORWARD_COMPAT, True), (glfw.VISIBLE, visible),
+                            (glfw.CONTEXT_CREATION_API, api)):
+            glfw.window_hint(hint, value)
+        win = glfw.create_window(size[0], size[1], title, None, None)
+        if win:
+            return win
+    return None
+
+
+class _GlfwLoader:
+    """GL entry points for moderngl from glfw (whatever API made the window's context)."""
+
+    def __init__(self, glfw):
+        self.glfw = glfw
+
+    def load_opengl_function(self, name: str) -> int:
+        import ctypes
+
+        return ctypes.cast(self.glfw.get_proc_address(name), ctypes.c_void_p).value or 0
+
+    def release(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        pass
+
+
 class Viewer:
     """The window: glfw callbacks -> :class:`Controls`; a frame loop with two frames in flight.
 
@@ -401,18 +432,14 @@ class Viewer:
             why = desc.decode() if isinstance(desc, bytes) else str(desc or "glfw.init failed")
             raise NoDisplayError(f"no display ({why}); render without a display with "
                                  "`lbwater capture SCENE`")
-        for hint, value in ((glfw.CONTEXT_VERSION_MAJOR, 3), (glfw.CONTEXT_VERSION_MINOR, 3),
-                            (glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE),
-                            (glfw.OPENGL_FORWARD_COMPAT, True), (glfw.VISIBLE, visible)):
-            glfw.window_hint(hint, value)
-        self.win = glfw.create_window(window_size[0], window_size[1], title, None, None)
+        self.win = _open_window(glfw, window_size, title, visible)
         if not self.win:
             glfw.terminate()
             raise NoDisplayError("could not open an OpenGL 3.3 window on this display; render "
                                  "without a display with `lbwater capture SCENE`")
         glfw.make_context_current(self.win)
         glfw.swap_interval(1 if vsync else 0)
-        self.ctx = moderngl.create_context()
+        self.ctx = moderngl.create_context(context=_GlfwLoader(glfw))
         self.presenter = Presenter(self.ctx, upload)
         from app.hud import Hud
         self.hud = Hud(self.ctx)
@@ -676,6 +703,7 @@ class Viewer:
 
     def close(self) -> None:
         self.world.close()
+        self.ctx.release()
         self.glfw.destroy_window(self.win)
         self.glfw.terminate()
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from app.controls import Action, Button
-from app.quality import Quality, grid_for
+from app.quality import Quality
 from app.scene import parse_scene
 from app.window import EventLog, Viewer, make_world
 
@@ -38,6 +38,11 @@ x = 0.3
 y = 0.3
 radius = 0.1
 height = 0.02
+
+[water.rain]
+radius = 0.05              # m
+height = 0.01              # m
+seed = 3
 
 [[lights]]
 kind = "directional"
@@ -94,11 +99,7 @@ def viewer(display, scene, rt):
 
 
 def fields(world):
-    """Water fields (h etc.) of a frame-API world, for the tests only."""
-    for name in ("water_fields", "fields"):
-        if hasattr(world, name):
-            return getattr(world, name)()
-    return world.sim.fields()
+    return world.water_fields()
 
 
 def water_pixel(world):
@@ -159,7 +160,7 @@ def test_drag_on_the_water_changes_heights_only_near_the_picked_points(viewer):
     radius = v.controls._ripple_radius()
     js, is_ = np.nonzero(changed)
     cx, cz = (is_ + 0.5) * w.dx, (js + 0.5) * w.dx
-    pts = np.array([(p[0], p[2]) for p in picks if p is not None])
+    pts = np.array([p.pool_xy for p in picks if p is not None and p.water])
     dist = np.min(np.hypot(cx[:, None] - pts[None, :, 0], cz[:, None] - pts[None, :, 1]), axis=1)
     assert dist.max() <= radius + 1.5 * w.dx
     assert changed.mean() < 0.5              # and not everywhere
@@ -200,7 +201,7 @@ def test_rain_adds_volume_and_pause_freezes_the_fields(viewer):
     f1 = fields(v.world)["h"].copy()
     mass1 = f1.sum() * w.dx ** 2
     rate, seconds = v.controls.rain_rate, 15 * FRAME_TIME
-    r, height = max(2.0 * w.dx, 0.02), 0.01             # the rain's drop (app._world_compat)
+    r, height = 0.05, 0.01                               # the scene's [water.rain]
     per_drop = height * r * r * (np.pi / 2 - 2 / np.pi)  # volume of the cosine bump
     budget = rate * seconds * per_drop
     assert mass1 - mass0 == pytest.approx(budget, rel=0.6)
@@ -250,8 +251,8 @@ def test_pick_meets_the_water_where_the_tracer_says(viewer):
     world = v.world
     f = fields(world)
     sc = v.scene.water
-    nx, ny = grid_for(sc.size, v.cells)
-    dx = sc.size[0] / nx
+    ny, nx = f["h"].shape
+    dx = v.controls.water.dx
     ii, jj = np.meshgrid(np.arange(nx), np.arange(ny))
     verts = np.stack([sc.origin[0] + (ii + 0.5) * dx, sc.origin[1] + f["bed"] + f["h"],
                       sc.origin[2] + (jj + 0.5) * dx], -1).reshape(-1, 3)
@@ -264,9 +265,10 @@ def test_pick_meets_the_water_where_the_tracer_says(viewer):
     for (px, py), (o, d), hit, t in zip(pix, rays, ref["hit"], ref["t"], strict=True):
         got = world.pick(px, py)
         if not hit:
-            assert got is None or not v.controls.water.pool_point(got)
+            assert got is None or not got.water
             continue
-        np.testing.assert_allclose(got, o + t * d, atol=2e-4)
+        assert got.water
+        np.testing.assert_allclose(got.point, o + t * d, atol=2e-4)
     assert ref["hit"][:2].all()
 
 

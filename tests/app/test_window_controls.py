@@ -70,12 +70,15 @@ class FakeWorld:
         self.camera = ((0.5, 1.5, 1.5), (0.5, 0.2, 0.5), (0, 1, 0), 50.0)
 
     def pick(self, px, py):
+        from app.world import Pick
+
         eye, target, up, fov = self.camera
         o, d = pixel_ray(eye, target, up, fov, *self.size, px, py)
         if d[1] >= 0:
             return None
         p = o + (0.2 - o[1]) / d[1] * d
-        return tuple(p) if 0 <= p[0] <= 1 and 0 <= p[2] <= 1 else None
+        water = 0 <= p[0] <= 1 and 0 <= p[2] <= 1
+        return Pick(tuple(p), 0 if water else 1, water, (p[0], p[2]) if water else None)
 
     def __getattr__(self, name):
         if name in ("add_drop", "push", "set_rain", "set_camera"):
@@ -103,7 +106,7 @@ def test_drag_on_water_drops_ripples_at_the_picked_points():
     for x, y, radius, height in drops:
         assert 0 <= x <= 1 and 0 <= y <= 1 and radius > 0 and height > 0
     p = world.pick(32, 30)                   # the press point, in image pixels
-    assert drops[0][:2] == pytest.approx((p[0], p[2]))
+    assert drops[0][:2] == pytest.approx(p.pool_xy)
     assert not any(n == "set_camera" for n, _ in world.calls)
 
 
