@@ -68,6 +68,17 @@ class GlyphAtlas:
     def text_width(self, text: str) -> float:
         return sum(self.advance.get(c, self.advance["?"]) for c in text)
 
+    def layout(self, lines) -> tuple[list[float], float, float]:
+        """Column offsets (px) of tab-separated lines, and the block's width and height."""
+        at, gap = self, 12.0
+        cols = [s.split("\t") for s in lines]
+        n = max(len(c) for c in cols)
+        widths = [max((at.text_width(c[i]) for c in cols if len(c) > i + 1), default=0.0)
+                  for i in range(n)]
+        offsets = [sum(widths[:i]) + gap * i for i in range(n)]
+        w = max(offsets[len(c) - 1] + at.text_width(c[-1]) for c in cols) + 12
+        return offsets, w, len(lines) * at.line_height + 8
+
     def quads(self, text: str, x: float, y: float, color) -> np.ndarray:
         """Vertices (6 per glyph) of ``text`` with its top-left at (x, y) px: pos, uv, color."""
         H, W = self.image.shape
@@ -118,30 +129,29 @@ class Hud:
                                                       "color")])
 
     def block_vertices(self, lines, x, y, color=(1, 1, 1, 1), box=(0, 0, 0, 0.55)):
-        """Vertices of a text block (box then glyphs) with its top-left at (x, y) px."""
+        """Vertices of a text block (box then glyphs) with its top-left at (x, y) px; a tab
+        starts the next column (columns aligned across the block's lines)."""
         at = self.atlas
         if not lines:
             return np.zeros((0, 8), np.float32)
-        w = max(at.text_width(s) for s in lines) + 12
-        h = len(lines) * at.line_height + 8
+        offsets, w, h = at.layout(lines)
         parts = [np.asarray(_rect(x, y, x + w, y + h, -1, -1, -1, -1, box),
                             np.float32).reshape(-1, 8)]
         for k, s in enumerate(lines):
-            parts.append(at.quads(s, x + 6, y + 4 + k * at.line_height, color))
+            for off, col in zip(offsets, s.split("\t"), strict=False):
+                parts.append(at.quads(col, x + 6 + off, y + 4 + k * at.line_height, color))
         return np.concatenate(parts)
 
     def draw(self, blocks, screen_size) -> None:
         """``blocks``: (lines, x, y[, color]) tuples; negative x or y count from the right or
         bottom edge."""
         verts = []
-        at = self.atlas
         for blk in blocks:
             lines, x, y = blk[:3]
             color = blk[3] if len(blk) > 3 else (1, 1, 1, 1)
             if not lines:
                 continue
-            w = max(at.text_width(s) for s in lines) + 12
-            h = len(lines) * at.line_height + 8
+            _, w, h = self.atlas.layout(lines)
             x = screen_size[0] + x - w if x < 0 else x
             y = screen_size[1] + y - h if y < 0 else y
             verts.append(self.block_vertices(lines, x, y, color))
@@ -176,7 +186,7 @@ def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
     kernel = sum(v for _, v in ms)
     lines.append(f"kernels {kernel:.2f} ms  wall {getattr(stats, 'wall_ms', 0.0):.2f} ms")
     for name, v in ms[:top]:
-        lines.append(f"  {name:<22} {v:7.3f} ms")
+        lines.append(f"  {name}\t{v:.3f} ms")
     lines.append(f"device: {device}")
     lines.append(f"display: {path}")
     if quality:
@@ -201,5 +211,5 @@ def guard_lines(stats) -> list[str]:
 
 
 def help_lines(help_table) -> list[str]:
-    width = max(len(k) for k, _ in help_table)
-    return ["keys and mouse"] + [f"{k:<{width}}  {v}" for k, v in help_table]
+    """Key and meaning in two aligned columns (a tab between them)."""
+    return ["keys and mouse"] + [f"{k}\t{v}" for k, v in help_table]

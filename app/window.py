@@ -78,6 +78,8 @@ def add_arguments(p) -> None:
     p.add_argument("--no-vsync", action="store_true", help="do not wait for the display refresh")
     p.add_argument("--frames", type=int, help="exit after this many frames")
     p.add_argument("--screenshot", help="write the last frame to this PNG on exit")
+    p.add_argument("--screenshot-hud", action="store_true",
+                   help="the --screenshot includes the HUD and overlays")
     p.add_argument("--events", help="replay input events from this JSON-lines file")
     p.add_argument("--record-events", help="write the input events to this JSON-lines file")
     p.add_argument("--frame-time", type=float,
@@ -632,7 +634,7 @@ class Viewer:
     def fps(self) -> float:
         return 0.0 if not self._dt_ema else 1.0 / self._dt_ema
 
-    def _draw(self) -> None:
+    def _draw(self, swap: bool = True) -> None:
         from app.hud import guard_lines, help_lines, hud_lines
 
         ctx, c = self.ctx, self.controls
@@ -659,7 +661,8 @@ class Viewer:
             blocks.append((help_lines(HELP), -8, -8))
         if blocks:
             self.hud.draw(blocks, self.fb_size)
-        self.glfw.swap_buffers(self.win)
+        if swap:
+            self.glfw.swap_buffers(self.win)
 
     def _toggle_fullscreen(self) -> None:
         g = self.glfw
@@ -681,8 +684,15 @@ class Viewer:
         """The shown frame as drawn on the window's framebuffer, without the HUD."""
         return self.presenter.snapshot(self.fb_size)
 
-    def save_screenshot(self, path) -> Path:
-        write_png(path, self.snapshot())
+    def snapshot_with_hud(self) -> np.ndarray:
+        """The window's framebuffer as drawn (image, HUD and overlays), row 0 on top."""
+        self._draw(swap=False)
+        w, h = self.fb_size
+        data = self.ctx.screen.read(viewport=(0, 0, w, h), components=4, alignment=1)
+        return np.frombuffer(data, np.uint8).reshape(h, w, 4)[::-1].copy()
+
+    def save_screenshot(self, path, hud: bool = False) -> Path:
+        write_png(path, self.snapshot_with_hud() if hud else self.snapshot())
         self.screenshots.append(Path(path))
         self.controls.say(self.now(), f"saved {path}")
         return Path(path)
@@ -739,7 +749,7 @@ def run(args) -> int:
         shown = viewer.run(args.frames)
         elapsed = time.perf_counter() - t0
         if args.screenshot:
-            viewer.save_screenshot(args.screenshot)
+            viewer.save_screenshot(args.screenshot, hud=args.screenshot_hud)
         if args.record_events:
             viewer.event_log().write(args.record_events)
         print(f"lbwater window: {shown} frames in {elapsed:.2f} s "

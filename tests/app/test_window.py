@@ -288,6 +288,19 @@ def test_resize_mid_run_rebuilds_at_the_new_size(viewer):
     assert any(e["kind"] == "resize" for e in v.recording)
 
 
+def test_hud_is_drawn_over_the_image_but_not_into_the_plain_screenshot(viewer):
+    v = viewer
+    for _ in range(3):
+        v.step()
+    plain, with_hud = v.snapshot(), v.snapshot_with_hud()
+    assert plain.shape == with_hud.shape == (48, 64, 4)
+    assert (plain != with_hud).any(axis=2).mean() > 0.1
+    v.on_action(Action.TOGGLE_HUD)
+    v.on_action(Action.TOGGLE_HELP)          # help was showing at start: now off
+    v.step()
+    np.testing.assert_array_equal(v.snapshot_with_hud(), v.snapshot())
+
+
 def test_no_display_is_one_line_and_status_2():
     env = {k: val for k, val in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     p = subprocess.run([sys.executable, "-m", "app.cli", "window", "--frames", "1"], env=env,

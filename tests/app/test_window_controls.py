@@ -239,12 +239,12 @@ class Stats:
 def test_hud_lines_show_fps_stages_grid_rays_device_and_guard_warnings():
     text = "\n".join(hud_lines(Stats, fps=59.94, path="copy", size=(64, 48), device="PoCL",
                                quality="quality auto", spp=1, bounces=2))
-    for want in ("59.9 FPS", "render.trace", "3.000 ms", "grid 32x24", "12,345 triangles",
+    for want in ("59.9 FPS", "render.trace\t3.000 ms", "grid 32x24", "12,345 triangles",
                  "2.50 M rays", "device: PoCL", "display: copy", "64x48"):
         assert want in text
     assert guard_lines(Stats) == ["water: 7 cells clamped"]
     assert hud_lines(None, fps=0, path="copy")[-1] == "display: copy"
-    assert help_lines([("R", "rain")])[1] == "R  rain"
+    assert help_lines([("R", "rain")])[1] == "R\train"
 
 
 def test_glyph_atlas_has_ink_for_letters_and_none_for_space():
@@ -256,3 +256,12 @@ def test_glyph_atlas_has_ink_for_letters_and_none_for_space():
     assert at.image[y:y + ch, x:x + cw].max() == 0
     assert at.quads("ab c", 0, 0, (1, 1, 1, 1)).shape == (18, 8)   # 3 glyphs, 6 vertices each
     assert math.isclose(at.text_width("ab"), at.advance["a"] + at.advance["b"])
+
+
+def test_tab_columns_line_up_across_a_block():
+    at = GlyphAtlas(14)
+    offsets, w, h = at.layout(["a\tb", "wide text\tc", "title"])
+    assert offsets == [0.0, at.text_width("wide text") + 12.0]
+    last = max(at.text_width("b"), at.text_width("c"))
+    assert w == pytest.approx(max(offsets[1] + last, at.text_width("title")) + 12)
+    assert h == 3 * at.line_height + 8
