@@ -288,6 +288,38 @@ def test_resize_mid_run_rebuilds_at_the_new_size(viewer):
     assert any(e["kind"] == "resize" for e in v.recording)
 
 
+def test_keys_that_rebuild_keep_the_camera_and_fullscreen_toggles(viewer):
+    v = viewer
+    v.step()
+    v.on_cursor(1, 1)
+    v.on_button(Button.LEFT, True)
+    v.on_cursor(9, 1)                        # orbit a little first
+    v.on_button(Button.LEFT, False)
+    v.step()
+    camera = v.world.camera
+    for a in (Action.GRID_DOWN, Action.BOUNCES_UP, Action.SPP_2):
+        v.on_action(a)
+    v.step()
+    v.step()
+    assert v.world.stats.water_cells == (21, 16)         # 32 / 1.5 along the longer side
+    assert (v.world.bounces, v.world.spp) == (2, 2)
+    assert v.world.camera == camera
+    v.on_action(Action.FULLSCREEN)
+    for _ in range(30):
+        v.step()
+        if v.glfw.get_window_monitor(v.win) and tuple(v.world.size) != SIZE:
+            break
+    mon = v.glfw.get_window_monitor(v.win)
+    mode = v.glfw.get_video_mode(mon).size
+    assert tuple(v.world.size) == (mode.width, mode.height)   # the screen's size
+    v.on_action(Action.FULLSCREEN)
+    for _ in range(30):
+        v.step()
+        if tuple(v.world.size) == SIZE:
+            break
+    assert not v.glfw.get_window_monitor(v.win) and tuple(v.world.size) == SIZE
+
+
 def test_hud_is_drawn_over_the_image_but_not_into_the_plain_screenshot(viewer):
     v = viewer
     for _ in range(3):
