@@ -75,19 +75,12 @@ class Frame:
 
 
 class _Slot:
-    """Host arrays one frame in flight reads into (the image in pinned memory)."""
+    """One frame in flight: its inputs and the non-blocking reads of its outputs."""
 
-    def __init__(self, rt, n_pixels: int, guard_dtype, stats_len: int):
-        # pinned host memory: a buffer the driver allocates in host memory, mapped once
-        self.pinned = rt.buffer(4 * n_pixels, cl.mem_flags.ALLOC_HOST_PTR)
-        self.rgba, _ = cl.enqueue_map_buffer(rt.queue, self.pinned, cl.map_flags.READ, 0,
-                                             (4 * n_pixels,), np.uint8, is_blocking=True)
-        self.guard = np.zeros(1, guard_dtype) if guard_dtype is not None else None
-        self.counts = np.zeros(stats_len, np.uint32)
-        self.event: cl.Event | None = None
+    def __init__(self):
         self.frame: Frame | None = None
         self.t0 = 0.0
-        self.levels = 0
+        self.rgba = self.counts = self.guard = None  # kernels.pinned.ReadHandle
 
 
 def buffer_bytes(*roots) -> int:
@@ -162,11 +155,18 @@ class World:
         self._stage_ms: dict = {}       # frame index -> stage times, until its stats are made
         self._stats: FrameStats | None = None
         self._picker = None
+        from kernels.pinned import PinnedRing
         from lbm.structs import GUARD_DTYPE
 
-        guard_dtype = GUARD_DTYPE if self.sim is not None else None
-        self._slots = [_Slot(self.rt, self.renderer.n_pixels, guard_dtype, STATS_LEN)
-                       for _ in range(int(frames_in_flight))]
+        n = int(frames_in_flight)
+        w, h = self.size
+        self._rings = {"rgba": PinnedRing(self.rt, 4 * w * h, np.uint8, (h, w, 4), slots=n),
+                       "counts": PinnedRing(self.rt, 4 * STATS_LEN, np.uint32, (STATS_LEN,),
+                                            slots=n)}
+        if self.sim is not None:
+            self._rings["guard"] = PinnedRing(self.rt, GUARD_DTYPE.itemsize, GUARD_DTYPE, (1,),
+                                              slots=n)
+        self._slots = [_Slot() for _ in range(n)]
         self._free = deque(self._slots)
         self._in_flight: deque[_Slot] = deque()
         self._guard_prev = None
@@ -323,7 +323,7 @@ class World:
             self._complete(self._in_flight.popleft(), keep_image=False)
 
     def _complete(self, slot: _Slot, keep_image: bool):
-        slot.event.wait()
+        rgba = slot.rgba.wait()
         wall = (time.perf_counter() - slot.t0) * 1e3
         for tag, ms in self.rt.timer.completed():
             self._stage_ms[tag] = ms
@@ -331,19 +331,17 @@ class World:
         stage_ms = self._stage_ms.pop(f.index, {})
         for old in [k for k in self._stage_ms if k < f.index]:
             del self._stage_ms[old]
-        img = slot.rgba.reshape(self.size[1], self.size[0], 4).copy() if keep_image else None
+        img = rgba.copy() if keep_image else None
         self._stats = self._make_stats(slot, stage_ms, wall)
         self._free.append(slot)
         return img
 
     def _make_stats(self, slot: _Slot, stage_ms: dict, wall_ms: float) -> FrameStats:
         f = slot.frame
-        per_depth = tuple(int(x) for x in slot.counts[: slot.levels + 1])
-        if not self.render_scene.has_secondary or self.renderer.settings.bounces == 0:
-            per_depth = per_depth[:1]
+        per_depth = tuple(self.renderer.stats_from(slot.counts.wait())["rays_per_depth"])
         guard = {"nan": False, "acted": False, "report": "ok"}
         if self.sim is not None:
-            g = slot.guard[0]
+            g = slot.guard.wait()[0]
             guard = self.sim.guard_summary(g, self._guard_prev)
             self._guard_prev = g.copy()
             guard["acted"] = guard.get("acted", bool(guard["restored"] or guard["damped"]
@@ -422,11 +420,8 @@ class World:
         return None if self.sim is None else self.sim.fields()
 
     def close(self) -> None:
-        """Complete the frames in flight and release the pinned image buffers."""
+        """Complete the frames in flight."""
         self.drain()
-        for s in self._slots:
-            s.rgba.base.release()
-        self._slots, self._free = [], deque()
 
     def __enter__(self):
         return self
@@ -503,9 +498,7 @@ class _Render:
         self.world = world
 
     def enqueue(self, frame: Frame, slot: _Slot) -> None:
-        r = self.world.renderer
-        r.enqueue_frame(update_scene=False)
-        slot.levels = r._levels
+        self.world.renderer.enqueue_frame(update_scene=False)
 
 
 class _Readback:
@@ -518,10 +511,9 @@ class _Readback:
 
     def enqueue(self, frame: Frame, slot: _Slot) -> None:
         w = self.world
-        q = w.rt.queue
-        r = w.renderer
-        cl.enqueue_copy(q, slot.counts, r.stats, is_blocking=False)
+        q, r, rings = w.rt.queue, w.renderer, w._rings
+        slot.counts = rings["counts"].enqueue_read(q, r.stats)
         if w.sim is not None:
-            cl.enqueue_copy(q, slot.guard, w.sim.guard_buffer, is_blocking=False)
-        slot.event = cl.enqueue_copy(q, slot.rgba, r.rgba, is_blocking=False)
+            slot.guard = rings["guard"].enqueue_read(q, w.sim.guard_buffer)
+        slot.rgba = rings["rgba"].enqueue_read(q, r.rgba)
         q.flush()
