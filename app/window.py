@@ -244,22 +244,6 @@ class EventLog:
                     fh.write(json.dumps(e) + "\n")
 
 
-def feed(controls: Controls, world, event: dict, now: float = 0.0) -> None:
-    """Give ``controls`` one recorded event, through the call live input makes."""
-    k = event["kind"]
-    if k == "button":
-        controls.mouse_button(world, Button[str(event["button"]).upper()],
-                              bool(event["pressed"]), bool(event["shift"]))
-    elif k == "cursor":
-        controls.cursor(world, float(event["x"]), float(event["y"]))
-    elif k == "scroll":
-        controls.scroll(world, float(event["dy"]))
-    elif k == "action":
-        controls.action(world, Action.from_str(event["action"]), now)
-    elif k == "resize":
-        controls.resize(world, int(event["width"]), int(event["height"]))
-
-
 # ---- GL: the image on screen ----------------------------------------------------------------
 _QUAD_VS = """
 #version 330
@@ -470,6 +454,7 @@ class Viewer:
         self.fullscreen_saved = None
         self.screenshots: list[Path] = []
         self.last_snapshot = None
+        self._keys = {getattr(glfw, f"KEY_{name}"): a for name, a in KEYMAP.items()}
         if replay is None:
             glfw.set_mouse_button_callback(self.win, self._glfw_button)
             glfw.set_cursor_pos_callback(self.win, self._glfw_cursor)
@@ -511,6 +496,22 @@ class Viewer:
         self._rec("resize", width=int(width), height=int(height))
         self.controls.resize(self.world, width, height)
 
+    def _replay(self, e: dict) -> None:
+        """One recorded event, through the same callbacks as live input (so a replay can be
+        recorded again)."""
+        k = e["kind"]
+        if k == "button":
+            self.on_button(Button[str(e["button"]).upper()], bool(e["pressed"]),
+                           bool(e["shift"]))
+        elif k == "cursor":
+            self.on_cursor(float(e["x"]), float(e["y"]))
+        elif k == "scroll":
+            self.on_scroll(float(e["dy"]))
+        elif k == "action":
+            self.on_action(Action.from_str(e["action"]))
+        elif k == "resize":
+            self.on_resize(int(e["width"]), int(e["height"]))
+
     def _glfw_button(self, win, button, action, mods) -> None:
         g = self.glfw
         b = {g.MOUSE_BUTTON_LEFT: Button.LEFT, g.MOUSE_BUTTON_RIGHT: Button.RIGHT,
@@ -528,9 +529,7 @@ class Viewer:
         g = self.glfw
         if action != g.PRESS:
             return
-        name = next((n[4:] for n in dir(g) if n.startswith("KEY_") and getattr(g, n) == key),
-                    None)
-        a = KEYMAP.get(name)
+        a = self._keys.get(key)
         if a == Action.GRID_UP and mods & g.MOD_SHIFT:
             a = Action.GRID_DOWN
         if a is not None:
@@ -596,8 +595,7 @@ class Viewer:
         else:
             g.poll_events()   # keep the window responsive; input comes from the file
             for e in self.replay.by_frame.get(self.next_frame, ()):
-                if e["kind"] != "tick":
-                    feed(self.controls, self.world, e, self.now())
+                self._replay(e)
         req = self.controls.apply(self.world)
         if req.fullscreen:
             self._toggle_fullscreen()
@@ -619,7 +617,9 @@ class Viewer:
             self._tick_fps()
         self._draw()
         if req.screenshot:
-            self.save_screenshot(Path(time.strftime("lbwater-%Y%m%d-%H%M%S.png")))
+            t = time.time()
+            stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(t))
+            self.save_screenshot(Path(f"lbwater-{stamp}-{int(t * 1000) % 1000:03d}.png"))
         return not (req.quit or g.window_should_close(self.win)
                     or (limit is not None and self.shown >= limit and not self.in_flight))
 

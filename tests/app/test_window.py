@@ -320,7 +320,10 @@ def test_keys_that_rebuild_keep_the_camera_and_fullscreen_toggles(viewer):
     assert not v.glfw.get_window_monitor(v.win) and tuple(v.world.size) == SIZE
 
 
-def test_hud_is_drawn_over_the_image_but_not_into_the_plain_screenshot(viewer):
+def test_hud_is_drawn_over_the_image_but_not_into_the_plain_screenshot(viewer, tmp_path,
+                                                                      monkeypatch):
+    from imageio.v3 import imread
+
     v = viewer
     for _ in range(3):
         v.step()
@@ -331,6 +334,12 @@ def test_hud_is_drawn_over_the_image_but_not_into_the_plain_screenshot(viewer):
     v.on_action(Action.TOGGLE_HELP)          # help was showing at start: now off
     v.step()
     np.testing.assert_array_equal(v.snapshot_with_hud(), v.snapshot())
+    monkeypatch.chdir(tmp_path)
+    v.on_action(Action.SCREENSHOT)           # S: a PNG named by time, in the working folder
+    v.step()
+    (shot,) = tmp_path.glob("lbwater-*.png")
+    assert imread(shot).shape == (48, 64, 4) and not list(tmp_path.glob(".*partial"))
+    assert (v.snapshot_with_hud() != v.snapshot()).any()   # "saved ..." shows for a while
 
 
 def test_no_display_is_one_line_and_status_2():
