@@ -260,7 +260,7 @@ def test_a_dip_spreads_the_light(rt):
     assert rms[1] > rms[0] * 1.1 and peaks[1] < peaks[0]
 
 
-# ---- settings --------------------------------------------------------------------------------------
+# ---- settings ---------------------------------------------------------------------------------
 def test_settings_reject_projected_and_bad_values():
     from app.errors import InputError
 
