@@ -34,7 +34,7 @@ def add_arguments(p) -> None:
     p.add_argument("scene", help="scene file (TOML) with a [water] section")
     p.add_argument("--steps", type=_steps, default=1000, help="LBM time steps (default 1000)")
     p.add_argument("--save", required=True, help="output .npz file")
-    p.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
+    p.add_argument("--device", help="OpenCL device: gpu, cpu, pocl, P:D or part of a name")
     p.add_argument("--chunk", type=_steps, default=500,
                    help="steps per guard report and progress line (default 500)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
@@ -42,9 +42,11 @@ def add_arguments(p) -> None:
 
 def run(args) -> int:
     import lbm
+    from app.io import check_output
     from app.scene import load_scene
     from kernels import get_runtime
 
+    check_output(args.save, "--save", (".npz",))
     scene = load_scene(args.scene)
     if scene.water is None:
         raise InputError(f"{scene.path}: the scene has no [water] section to simulate")

@@ -34,6 +34,7 @@ import pyopencl as cl
 
 from kernels.launch import Kernel
 from kernels.pinned import PinnedRing, ReadHandle
+from kernels.limits import check_fits
 from kernels.runtime import Runtime
 from raytrace.bvh import HIT_DTYPE
 from raytrace.caustics import CAUSTIC_PARAMS
@@ -173,6 +174,8 @@ class Renderer:
         self.capacity = max(self.n_primary_max,
                             int(math.ceil(s.capacity_factor * self.n_primary_max)))
         cap = self.capacity
+        check_fits(rt, cap * BYTES_PER_RAY_SLOT + self.n_pixels * (20 + s.aov * AOV.itemsize),
+                   f"render {s.width}x{s.height}", largest=16 * self.n_pixels)  # kernels.limits
         self.rays = [rt.buffer(cap * RAY.itemsize), rt.buffer(cap * RAY.itemsize)]
         self.hits = rt.buffer(cap * HIT_DTYPE.itemsize)
         self.radiance = rt.buffer(cap * 16)
