@@ -33,8 +33,8 @@ import numpy as np
 import pyopencl as cl
 
 from kernels.launch import Kernel
-from kernels.pinned import PinnedRing, ReadHandle
 from kernels.limits import check_fits
+from kernels.pinned import PinnedRing, ReadHandle
 from kernels.runtime import Runtime
 from raytrace.bvh import HIT_DTYPE
 from raytrace.caustics import CAUSTIC_PARAMS
