@@ -1,8 +1,9 @@
 /* Caustics stage: sunlight traced through the live water surface onto the pool's floor and walls.
  * Launch order per frame (raytrace/caustics.py, Caustics.enqueue), no host sync:
  *   caustics_clear    zero the fixed-point accumulator (3 uint per texel)
- *   caustics_photons  once per directional light: a jittered grid_x * grid_z photon grid over
- *                     the water at its rest level; each photon is traced (scene_closest_hit),
+ *   caustics_photons  once per light (directional, or a spot above the water): a jittered
+ *                     grid_x * grid_z photon grid over the water at its rest level (from a
+ *                     spot: photons aimed at the grid's points); each photon is traced (scene_closest_hit),
  *                     refracted into the water (Snell with the shading normal, 1 - Fresnel),
  *                     attenuated (Beer-Lambert) to its first opaque hit, and splatted there when
  *                     that is the pool instance: atomic_add of its flux in fixed point
@@ -22,9 +23,16 @@ __kernel void caustics_clear(__global uint* restrict accum, const CausticParams 
     for (uint i = get_global_id(0); i < n; i += get_global_size(0)) accum[i] = 0u;
 }
 
-/* Where photon i starts: a jittered point of its grid cell at the water's rest level, moved
- * back along the light to emit_y. */
-inline float3 photon_origin(const CausticParams* cp, uint i)
+inline float cone01(float e0, float e1, float x)   /* render_shade.cl's smooth01 */
+{
+    const float t = clamp((x - e0) / fmax(e1 - e0, 1e-7f), 0.0f, 1.0f);
+    return t * t * (3.0f - 2.0f * t);
+}
+
+/* Photon i: a jittered point of its grid cell at the water's rest level; a directional light's
+ * photon starts there moved back along the light to emit_y, a spot's at the spot, with the flux
+ * of the solid angle the cell subtends, I cone(d) |d.y| cell / dist^2. */
+inline float3 photon_start(const CausticParams* cp, uint i, float3* dir, float3* phi)
 {
     const uint ix = i % cp->grid_x, iz = i / cp->grid_x;
     const uint key = hash_u32(i * 0x9e3779b9u ^ hash_u32(cp->seed));
@@ -33,7 +41,18 @@ inline float3 photon_origin(const CausticParams* cp, uint i)
     const float ch = (cp->emit.w - cp->emit.y) / (float)cp->grid_z;
     const float3 p = (float3)(cp->emit.x + ((float)ix + jx) * cw, cp->light_dir.w,
                               cp->emit.y + ((float)iz + jz) * ch);
+    if (cp->light_pos.w > 0.0f) {
+        const float3 to = p - cp->light_pos.xyz;
+        const float dist2 = dot(to, to);
+        *dir = to * rsqrt(dist2);
+        *phi = cp->flux.xyz * (cone01(cp->cos_outer, cp->cos_inner,
+                                      dot(*dir, cp->light_dir.xyz))
+                               * -dir->y / dist2);
+        return cp->light_pos.xyz;
+    }
     const float3 d = cp->light_dir.xyz;
+    *dir = d;
+    *phi = cp->flux.xyz;
     return p - d * ((cp->emit_y - cp->light_dir.w) / -d.y);
 }
 
@@ -50,9 +69,8 @@ __kernel void caustics_photons(SCENE_PARAMS, RENDER_GEOM_PARAMS, const CausticPa
 {
     const uint n = cp.grid_x * cp.grid_z;
     for (uint i = get_global_id(0); i < n; i += get_global_size(0)) {
-        float3 org = photon_origin(&cp, i);
-        float3 d = cp.light_dir.xyz;
-        float3 phi = cp.flux.xyz;
+        float3 d, phi;
+        float3 org = photon_start(&cp, i, &d, &phi);
         int medium = RENDER_NO_MEDIUM;
         for (int k = 0; k < CAUSTIC_MAX_HITS; k++) {
             const Hit h = scene_closest_hit(SCENE_ARGS, org, d, 0.0f, INFINITY);

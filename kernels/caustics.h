@@ -16,14 +16,16 @@
 /* A photon meets at most this many surfaces: the water from above, then the receiver. */
 #define CAUSTIC_MAX_HITS 3
 
-/* 160 bytes. */
+/* 176 bytes. */
 typedef struct {
     float4 box_lo;      /* xyz pool box min corner (m): the floor is y = box_lo.y */
     float4 box_hi;      /* xyz pool box max corner (m): the walls' tops are y = box_hi.y */
     float4 texel;       /* xyz texel size along x, y, z (m); w: W per fixed-point unit */
     float4 emit;        /* photon grid over the water at its rest level: x0, z0, x1, z1 (m) */
     float4 light_dir;   /* xyz unit direction the light travels; w: rest level y of the water */
-    float4 flux;        /* rgb flux per photon (W): E |d.y| cell area; w: fixed-point units/W */
+    float4 flux;        /* rgb flux per photon (W): directional E |d.y| cell area, spot I cell
+                           area (times cone |d.y| / dist^2 per photon); w: fixed-point units/W */
+    float4 light_pos;   /* xyz spot position (m); w: 1 for a spot (light_dir: its axis), 0 */
     uint nx, ny, nz, n_texels;  /* texels along x, y, z; texels of the atlas */
     uint grid_x, grid_z, seed, fresnel;  /* photon grid; frame's jitter seed; FRESNEL_* */
     int pool_instance;  /* the receiver instance (the pool's floor and walls) */
@@ -32,7 +34,7 @@ typedef struct {
     uint filter_radius; /* tent filter radius (texels), 0: none */
     float blend;        /* weight of last frame's map (0: none, the first frame) */
     float emit_y;       /* height the photons start from (above every surface they can meet) */
-    float pad0, pad1;
+    float cos_inner, cos_outer; /* spot cone: full inside inner, smooth to zero at outer */
 } CausticParams;
 
 /* Face of a receiver point from its normal facing the incoming ray (or photon); -1: none. */

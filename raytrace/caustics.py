@@ -32,14 +32,15 @@ from raytrace.render_types import LightKind, _Choice
 
 f4 = (np.float32, 4)
 
-#: The caustics launches' by-value parameters (kernels/caustics.h CausticParams, 160 bytes).
+#: The caustics launches' by-value parameters (kernels/caustics.h CausticParams, 176 bytes).
 CAUSTIC_PARAMS = np.dtype([
     ("box_lo", f4), ("box_hi", f4), ("texel", f4), ("emit", f4), ("light_dir", f4), ("flux", f4),
+    ("light_pos", f4),
     ("nx", np.uint32), ("ny", np.uint32), ("nz", np.uint32), ("n_texels", np.uint32),
     ("grid_x", np.uint32), ("grid_z", np.uint32), ("seed", np.uint32), ("fresnel", np.uint32),
     ("pool_instance", np.int32), ("enabled", np.uint32), ("light_mask", np.uint32),
     ("filter_radius", np.uint32), ("blend", np.float32), ("emit_y", np.float32),
-    ("pad0", np.float32), ("pad1", np.float32)])
+    ("cos_inner", np.float32), ("cos_outer", np.float32)])
 
 STRUCTS = [("caustics.h", "CausticParams", CAUSTIC_PARAMS)]
 
@@ -131,7 +132,8 @@ class Caustics:
 
     ``box``: :class:`PoolBox`; ``settings``: :class:`CausticSettings`; ``fresnel``: as the
     renderer's (exact | schlick); ``seed``: the scene's jitter seed. Photons come from the
-    directional lights that shine downwards (spot lights keep their shadow rays)."""
+    directional lights that shine downwards and from spot lights above the water's rest level
+    (other lights keep their shadow rays)."""
 
     def __init__(self, rt, render_scene, box: PoolBox, settings: CausticSettings, *,
                  fresnel: str = "exact", seed: int = 0):
@@ -172,10 +174,22 @@ class Caustics:
         self._history = False
 
     def lights(self) -> list[int]:
-        """Indices of the lights the map carries: directional lights shining downwards."""
-        L = self.scene.lights
-        return [i for i in range(len(L)) if int(L[i]["kind"]) == int(LightKind.DIRECTIONAL)
-                and L[i]["direction"][1] < -1e-6 and L[i]["color"][:3].max() > 0]
+        """Indices of the lights the map carries: directional lights shining downwards, spot
+        lights above the water's rest level."""
+        L, level = self.scene.lights, self.box.level
+        out = []
+        for i in range(len(L)):
+            if L[i]["color"][:3].max() <= 0:
+                continue
+            if int(L[i]["kind"]) == int(LightKind.DIRECTIONAL):
+                if L[i]["direction"][1] < -1e-6:
+                    out.append(i)
+            elif L[i]["position"][1] > level + 1e-3:
+                out.append(i)
+        return out
+
+    def _is_spot(self, light: int) -> bool:
+        return int(self.scene.lights[light]["kind"]) == int(LightKind.SPOT)
 
     def _base(self) -> np.ndarray:
         b = self.box
@@ -194,16 +208,28 @@ class Caustics:
         return p
 
     def _photon_flux(self, light: int) -> np.ndarray:
-        """Flux (W, rgb) of one photon of ``light``: E |d.y| times a grid cell's area."""
+        """CausticParams.flux of ``light``: a directional photon's flux (W, rgb), E |d.y| times a
+        grid cell's area; for a spot I times the cell's area (the kernel multiplies by the cone
+        and |d.y| / dist^2)."""
         x0, z0, x1, z1 = self.box.water
         rec = self.scene.lights[light]
+        cell = (x1 - x0) * (z1 - z0) / (self.grid[0] * self.grid[1])
+        if self._is_spot(light):
+            return np.asarray(rec["color"][:3], float) * cell
         d = np.asarray(rec["direction"][:3], float)
         d /= np.linalg.norm(d)
-        cell = (x1 - x0) * (z1 - z0) / (self.grid[0] * self.grid[1])
         return np.asarray(rec["color"][:3], float) * -d[1] * cell
 
+    def _max_photon_flux(self, light: int) -> float:
+        """The largest flux one photon of ``light`` can carry (a spot's: I cell / height^2)."""
+        f = self._photon_flux(light).max()
+        if self._is_spot(light):
+            h = float(self.scene.lights[light]["position"][1]) - self.box.level
+            f /= h * h
+        return f
+
     def _units_per_watt(self) -> float:
-        fmax = max((self._photon_flux(i).max() for i in self.lights()), default=0.0)
+        fmax = max((self._max_photon_flux(i) for i in self.lights()), default=0.0)
         return UNITS_PER_PHOTON / fmax if fmax > 0 else 1.0
 
     def params(self, frame: int = 0, light: int | None = None) -> np.ndarray:
@@ -222,6 +248,10 @@ class Caustics:
             p["light_dir"][:3] = d / np.linalg.norm(d)
             p["flux"][:3] = self._photon_flux(light)
             p["seed"] = frame_seed(self.seed, frame, light)
+            if self._is_spot(light):
+                p["light_pos"][:3] = rec["position"][:3]
+                p["light_pos"][3] = 1.0
+                p["cos_inner"], p["cos_outer"] = rec["cos_inner"], rec["cos_outer"]
         return p
 
     def view_params(self) -> np.ndarray:

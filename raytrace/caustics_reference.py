@@ -11,7 +11,8 @@ from raytrace import render_reference as ref
 
 
 def photon_origins(cp) -> tuple[np.ndarray, np.ndarray]:
-    """Origins (n, 3) and the unit direction of a photon launch's grid."""
+    """Origins (n, 3) and the unit direction of a directional launch's photons (for a spot
+    launch: its grid points on the water plane and the axis)."""
     gx, gz = int(cp["grid_x"]), int(cp["grid_z"])
     i = np.arange(gx * gz, dtype=np.uint64)
     key = ref.hash_u32((i * 0x9E3779B9 & 0xFFFFFFFF).astype(np.uint32)
@@ -24,7 +25,25 @@ def photon_origins(cp) -> tuple[np.ndarray, np.ndarray]:
     ix, iz = (i % gx).astype(float), (i // gx).astype(float)
     p = np.stack([ex0 + (ix + jx) * (ex1 - ex0) / gx, np.full(len(i), level),
                   ez0 + (iz + jz) * (ez1 - ez0) / gz], -1)
+    if cp["light_pos"][3] > 0:
+        return p, d
     return p - d * ((float(cp["emit_y"]) - level) / -d[1]), d
+
+
+def photon_starts(cp) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Origins, unit directions and fluxes (W, rgb) of a launch's photons, each (n, 3)."""
+    p, axis = photon_origins(cp)
+    flux = np.asarray(cp["flux"][:3], np.float64)
+    if cp["light_pos"][3] <= 0:
+        return p, np.tile(axis, (len(p), 1)), np.tile(flux, (len(p), 1))
+    P = np.asarray(cp["light_pos"][:3], np.float64)
+    to = p - P
+    dist2 = np.sum(to * to, 1)
+    d = to / np.sqrt(dist2)[:, None]
+    lo, hi = float(cp["cos_outer"]), float(cp["cos_inner"])
+    t = np.clip((d @ axis - lo) / max(hi - lo, 1e-7), 0.0, 1.0)
+    cone = t * t * (3 - 2 * t)
+    return np.tile(P, (len(p), 1)), d, flux * (cone * -d[:, 1] / dist2)[:, None]
 
 
 def face_of(nf: np.ndarray) -> np.ndarray:
@@ -58,10 +77,8 @@ def trace_photons(tables: dict, cp) -> dict:
     hit point and its flux (W, rgb) there."""
     world = ref.World(tables)
     mats = tables["materials"]
-    o, d0 = photon_origins(cp)
+    o, d, phi = photon_starts(cp)
     n = len(o)
-    d = np.tile(d0, (n, 1))
-    phi = np.tile(np.asarray(cp["flux"][:3], np.float64), (n, 1))
     medium = np.full(n, -1)
     alive = np.ones(n, bool)
     texel = np.full(n, -1)

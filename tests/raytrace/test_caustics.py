@@ -59,7 +59,7 @@ def height_field(x0, z0, x1, z1, n, height, grad):
 
 
 def pool_scene(rt, *, lo, hi, level, light_dir, color=(1.0, 1.0, 1.0), absorption=(0, 0, 0),
-               height=None, grad=None, n_grid=9, boat=None, water=None):
+               height=None, grad=None, n_grid=9, boat=None, water=None, spot=None):
     """A RenderScene: a pool box and a water height field over its whole top (flat at
     ``level`` unless ``height``/``grad`` are given). Returns (scene, PoolBox)."""
     rs = RenderScene(rt)
@@ -76,7 +76,10 @@ def pool_scene(rt, *, lo, hi, level, light_dir, color=(1.0, 1.0, 1.0), absorptio
     if boat is not None:
         Vo, Fo = box_mesh(*boat)
         rs.add_instance(rs.add_mesh(Vo, Fo, material=tiles))
-    rs.add_light("directional", direction=light_dir, color=color)
+    if spot is None:
+        rs.add_light("directional", direction=light_dir, color=color)
+    else:  # dict(position=..., inner_angle=..., outer_angle=...)
+        rs.add_light("spot", direction=light_dir, color=color, **spot)
     rs.update()
     return rs, PoolBox(tuple(lo), tuple(hi), (x0, z0, x1, z1), level, pool)
 
@@ -90,9 +93,11 @@ def run(rt, rs, box, frame=0, **settings):
 
 
 # ---- the photon path against float64 --------------------------------------------------------
-def test_photons_match_the_float64_reference_on_a_wavy_surface(rt):
-    """A wavy surface, an absorbing tinted water, an oblique sun: every texel's flux (before
-    the filter) equals the float64 reference's; photons land on the floor and on walls."""
+@pytest.mark.parametrize("kind", ["directional", "spot"])
+def test_photons_match_the_float64_reference_on_a_wavy_surface(rt, kind):
+    """A wavy surface, an absorbing tinted water, an oblique sun (or a spot off to one side):
+    every texel's flux (before the filter) equals the float64 reference's; photons land on the
+    floor and on walls."""
     lo, hi = (0.0, 0.0, 0.0), (1.0, 0.8, 0.7)
 
     def h(X, Z):
@@ -105,7 +110,9 @@ def test_photons_match_the_float64_reference_on_a_wavy_surface(rt):
 
     rs, box = pool_scene(rt, lo=lo, hi=hi, level=0.5, light_dir=(0.5, -1.0, 0.3),
                          color=(2.0, 1.5, 1.0), absorption=(0.45, 0.09, 0.06), height=h,
-                         grad=g, n_grid=7)
+                         grad=g, n_grid=7,
+                         spot=None if kind == "directional" else dict(
+                             position=(0.1, 1.3, 0.2), inner_angle=25, outer_angle=40))
     c = run(rt, rs, box, frame=3, photons=300, resolution=12)
     got = np.concatenate([v.reshape(-1, 3) for v in c.read_flux().values()])
     cp = c.params(3, 0)
@@ -196,6 +203,23 @@ def test_a_boat_in_the_water_shadows_the_floor(rt):
     c = run(rt, rs, box, photons=4096, resolution=20)
     E = c.read_map()["floor"][..., 0]
     assert E[10, 10] == 0.0 and E[2, 2] > 0.5
+
+
+def test_a_spot_over_flat_water_lights_the_floor_as_from_its_virtual_source(rt):
+    """A spot h1 above flat water, the floor h2 below it: paraxially the refracted rays diverge
+    from a virtual source n h1 above the water, so below the spot the floor's irradiance is
+    I (1 - F(0)) / (h1 + h2 / n)^2 (thin-beam optics), within 2%."""
+    h1, h2 = 0.5, 0.4
+    lo, hi = (-0.6, -h2, -0.6), (0.6, 0.0, 0.6)
+    rs, box = pool_scene(rt, lo=lo, hi=hi, level=0.0, light_dir=(0, -1, 0), color=(2, 2, 2),
+                         spot=dict(position=(0.0, h1, 0.0), inner_angle=70, outer_angle=80))
+    c = run(rt, rs, box, photons=160_000, resolution=120, filter=2)
+    E = c.read_map()["floor"][..., 0]
+    centre = E[58:62, 58:62].mean()
+    F0 = ((N_WATER - 1) / (N_WATER + 1)) ** 2
+    want = 2.0 * (1 - F0) / (h1 + h2 / N_WATER) ** 2
+    assert abs(centre - want) < 0.02 * want, (centre, want)
+    assert E[5, 60] < 0.8 * centre, "falls off away from the axis"
 
 
 # ---- focus ---------------------------------------------------------------------------------------
