@@ -1,11 +1,8 @@
-"""Errors the CLI reports as one line and a non-zero exit (never a traceback)."""
+"""Errors the CLI reports as one line and a non-zero exit (never a traceback). Declared in
+``kernels.errors`` so lbm and raytrace raise the same classes without importing app."""
 
 from __future__ import annotations
 
+from kernels.errors import InputError, LbwaterError
 
-class LbwaterError(Exception):
-    """Base for user-facing errors: bad input, bad scene, unstable simulation, bad device."""
-
-
-class InputError(LbwaterError, ValueError):
-    """A file, key or value given by the user is wrong; the message names it and the rule."""
+__all__ = ["InputError", "LbwaterError"]

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from app.errors import InputError
+from kernels.errors import InputError
 from raytrace.render_types import LightKind, _Choice
 
 f4 = (np.float32, 4)

@@ -8,6 +8,8 @@ import enum
 
 import numpy as np
 
+from kernels.errors import InputError
+
 MAX_LIGHTS = 8
 MAX_DEPTH = 32
 STAT_DROPPED = MAX_DEPTH + 1
@@ -26,7 +28,7 @@ class _Choice(enum.IntEnum):
             return cls[str(name).upper()]
         except KeyError:
             valid = ", ".join(m.name.lower() for m in cls)
-            raise ValueError(f"unknown {cls.__name__} {name!r}; valid: {valid}") from None
+            raise InputError(f"unknown {cls.__name__} {name!r}; valid: {valid}") from None
 
     def __str__(self) -> str:
         return self.name.lower()
