@@ -72,6 +72,7 @@ class _Builder:
         self.textures: dict = {}
         self.materials: dict = {}
         self.instances: dict = {}
+        self.boat_instances: list = []   #: instance ids of the [[boats]], in order
 
     def texture(self, path: Path) -> int:
         if path not in self.textures:
@@ -135,7 +136,9 @@ class _Builder:
         from app.meshes import load_mesh, load_mesh_groups, smooth_normals
 
         rs = self.rs
-        for m in self.scene.meshes:
+        # [[boats]] render like [[meshes]], placed at their starting pose; a bodies stage
+        # (lbm.bodies.Boats, app.boats) moves them by writing their transform rows
+        for m in (*self.scene.meshes, *self.scene.boats):
             V, F = load_mesh(m.file)
             normals = smooth_normals(V, F) if m.smooth else None
             groups = None if m.material else load_mesh_groups(m.file, len(F))
@@ -151,6 +154,8 @@ class _Builder:
                                    material=self.material("", TILES | {"specular": (0.2,) * 3}))
             inst = rs.add_instance(mesh, mesh_transform(V, m.position, m.rotation, m.size))
             self.instances[inst] = m.file.name
+            if m in self.scene.boats:
+                self.boat_instances.append(inst)
 
     def water(self, sim, water: WaterSpec) -> WaterSurface:
         import lbm
