@@ -45,6 +45,7 @@ class Assembly:
     sim: object | None              #: lbm.ShallowWater or None (no [water])
     water: WaterSurface | None
     instances: dict                 #: instance id -> what it is ("water", "pool", mesh file)
+    boat_instances: list = dataclasses.field(default_factory=list)  #: [[boats]] instance ids
 
 
 def resized_water(water: WaterSpec, cells: int) -> WaterSpec:
@@ -214,7 +215,7 @@ def assemble(scene: Scene, rt, *, cells: int | None = None, water_steps: int | N
     if not b.rs.meshes:
         raise InputError(f"{scene.path}: the scene has nothing to render (no [[meshes]], no "
                          "[water])")
-    return Assembly(b.rs, sim, surface, b.instances)
+    return Assembly(b.rs, sim, surface, b.instances, b.boat_instances)
 
 
 def render_settings(scene: Scene, *, width=None, height=None, spp=None, bounces=None,

@@ -326,3 +326,33 @@ def test_force_torque_reduction_matches_float64(rt):
     np.testing.assert_allclose(st["force"][:3], F_ref, rtol=2e-4, atol=2e-3)
     np.testing.assert_allclose(st["torque"][:3], T_ref, rtol=2e-4, atol=2e-3)
     assert st["force"][3] == pytest.approx(V_ref, rel=2e-4)
+
+
+def test_walls_stop_a_boat_and_boats_can_be_added_and_dropped(rt):
+    """A boat thrown at 2 m/s towards the +x wall stops with its bounding circle inside; a second
+    boat added later writes its own transform row; dropping the first leaves the second."""
+    sim = pool(rt, size=(2.0, 1.5), drag=0.0)
+    T = rt.buffer(48 * 3)
+    V, F = box(0.6, 0.3, 0.3)
+    boats = Boats(sim, [BoatSpec(V, F, mass=12.0, position=(1.0, 0.46, 0.75), mass_height=0.05,
+                                 name="a")], T, [0])
+    boats.set_velocity(0, (2.0, 0.0, 0.0))
+    xs = np.array([pos[0, 0] for _, pos, _ in run(sim, boats, 1.5, k=1, every=1)])
+    limit = 2.0 - boats.hull(0).radius
+    assert xs.max() == pytest.approx(limit, abs=1e-4)    # it reached the wall ...
+    assert (xs <= limit + 1e-4).all()                     # ... and never went through
+    k = boats.add(BoatSpec(V, F, mass=12.0, position=(0.5, 0.46, 0.75), mass_height=0.05,
+                           name="b"), 2)
+    assert k == 1 and boats.names == ["a", "b"]
+    for _ in run(sim, boats, 0.2):
+        pass
+    rows = rt.to_host(T, np.float32, 36).reshape(3, 3, 4)
+    p, q = boats.poses()
+    R = matrix_from_quat(q[1])
+    np.testing.assert_allclose(rows[2, :, :3], R, atol=1e-5)
+    np.testing.assert_allclose(rows[2, :, 3], p[1] + R @ [0, -0.05, 0], atol=1e-5)
+    boats.drop(0)
+    assert boats.names == ["b"] and boats.poses()[0].shape == (1, 3)
+    for _ in run(sim, boats, 0.2):
+        pass
+    assert np.isfinite(boats.poses()[0]).all()
