@@ -7,6 +7,9 @@ x (nx,) and y (ny,) cell-centre coordinates in m, time (s), dt (s), steps, and t
 report; with ``[[boats]]`` also boat_position (boats x 3, the centre of mass in world m),
 boat_rotation (boats x 4, quaternion w, x, y, z) and boat_names (the boats float on the water,
 coupled both ways, lbm.bodies). Written atomically: on any error no file is left behind.
+
+``--vtk DIR --every K`` also writes the surface every K steps (and at the start and the end) as a
+ParaView time series ``DIR/water.pvd`` of structured grids with h, u, v, bed (app.vtk_output).
 """
 
 from __future__ import annotations
@@ -35,8 +38,11 @@ def _steps(text: str) -> int:
 def add_arguments(p) -> None:
     p.add_argument("scene", help="scene file (TOML) with a [water] section")
     p.add_argument("--steps", type=_steps, default=1000, help="LBM time steps (default 1000)")
-    p.add_argument("--save", required=True, help="output .npz file")
-    p.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
+    p.add_argument("--save", help="output .npz file")
+    p.add_argument("--vtk", metavar="DIR", help="also write DIR/water.pvd (ParaView time series)")
+    p.add_argument("--every", type=_steps, default=100, metavar="K",
+                   help="with --vtk: steps between written surfaces (default 100)")
+    p.add_argument("--device", help="OpenCL device: gpu, cpu, pocl, P:D or part of a name")
     p.add_argument("--chunk", type=_steps, default=500,
                    help="steps per guard report and progress line (default 500)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
@@ -47,9 +53,19 @@ def add_arguments(p) -> None:
 
 def run(args) -> int:
     import lbm
+    from app.io import check_output
     from app.scene import load_scene
     from kernels import get_runtime
 
+    if args.save is None and args.vtk is None:
+        raise InputError("give --save FILE.npz and/or --vtk DIR")
+    if args.save is not None:
+        check_output(args.save, "--save", (".npz",))
+    vtk = None
+    if args.vtk is not None:
+        from app.vtk_output import PvdWriter
+
+        vtk = PvdWriter(args.vtk)   # an unwritable folder fails here, before any simulation
     scene = load_scene(args.scene)
     if scene.water is None:
         raise InputError(f"{scene.path}: the scene has no [water] section to simulate")
@@ -70,8 +86,16 @@ def run(args) -> int:
         f"e = {sim.e:.4g} m/s, dt = {sim.dt:.4g} s, tau = {sim.tau:.4g}")
     t0, done, stages, reports = time.perf_counter(), 0, {}, []
     acted = {"cells": 0, "restored": 0, "froude": 0.0}
+
+    def write_vtk():
+        vtk.write(done, sim.time, sim.fields(), sim.dx, scene.water.origin)
+
+    if vtk is not None:
+        write_vtk()
     while done < args.steps:
         n = min(args.chunk, args.steps - done)
+        if vtk is not None:
+            n = min(n, args.every - done % args.every)
         sim.step(n)
         done += n
         s = sim.stats()   # waits for this chunk: the only host read per chunk
@@ -87,6 +111,8 @@ def run(args) -> int:
         if s["acted"] and args.strict:
             raise InputError(f"{scene.path}: --strict: the guard acted at t = {s['time']:.4g} s "
                              f"({s['report']})")
+        if vtk is not None and (done % args.every == 0 or done == args.steps):
+            write_vtk()
         log(f"step {done}/{args.steps}  t = {s['time']:.4g} s  volume = {s['mass']:.6g} m^3  "
             f"max |u|/e = {s['max_speed_ratio']:.3g}  max Fr = {s['max_froude']:.3g}")
     wall = time.perf_counter() - t0
@@ -98,6 +124,10 @@ def run(args) -> int:
     f = sim.fields()
     x = (np.arange(sim.nx) + 0.5) * sim.dx
     y = (np.arange(sim.ny) + 0.5) * sim.dx
+    if vtk is not None:
+        log(f"wrote {vtk.pvd_path} ({len(vtk.entries)} surfaces)")
+    if args.save is None:
+        return 0
     extra = {}
     if boats is not None:
         pos, quat = boats.poses()

@@ -22,6 +22,7 @@ import pyopencl as cl
 
 from kernels import Runtime, get_runtime
 from lbm.lattice import GH_LIMIT, Lattice, Options, choose_lattice, equilibrium
+from lbm.limits import check_grid
 from lbm.structs import GUARD_DTYPE, PARAMS_DTYPE, PARTIAL_DTYPE, SOURCE_DTYPE, record
 
 
@@ -140,6 +141,7 @@ class ShallowWater:
         self.options = Options.from_kwargs(**options)
         self.rt: Runtime = device if isinstance(device, Runtime) else get_runtime(device)
         n = self.n_cells = self.nx * self.ny
+        check_grid(self.rt, self.nx, self.ny)  # 32-bit indices and device memory (lbm.limits)
         fb = 9 * self.storage.bytes * n
         if fb > self.rt.device.max_mem_alloc_size:
             raise ValueError(f"grid {nx}x{ny} needs {fb / 2**20:.0f} MiB per population "
