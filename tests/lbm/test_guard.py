@@ -144,7 +144,10 @@ def test_rain_deepening_the_water_rechooses_the_lattice(rt):
     notes = []
     for _ in range(30):
         sim.step(20)
+        g = sim.guard_record()   # a frame loop's view (guard_summary) warns; stats() acts
+        warned = "past the depth the lattice was chosen for" in sim.guard_summary(g, g)["report"]
         s = sim.stats()
+        assert warned == bool(s["lattice"])
         _assert_budget(s, rel=1e-5)
         if s["lattice"]:
             notes.append(s)
