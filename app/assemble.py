@@ -46,6 +46,7 @@ class Assembly:
     water: WaterSurface | None
     instances: dict                 #: instance id -> what it is ("water", "pool", mesh file)
     caustic_box: object | None = None  #: raytrace.caustics.PoolBox (a pool with water) or None
+    boat_instances: list = dataclasses.field(default_factory=list)  #: [[boats]] instance ids
 
 
 def resized_water(water: WaterSpec, cells: int) -> WaterSpec:
@@ -73,6 +74,7 @@ class _Builder:
         self.textures: dict = {}
         self.materials: dict = {}
         self.instances: dict = {}
+        self.boat_instances: list = []   #: instance ids of the [[boats]], in order
 
     def texture(self, path: Path) -> int:
         if path not in self.textures:
@@ -136,7 +138,9 @@ class _Builder:
         from app.meshes import load_mesh, load_mesh_groups, smooth_normals
 
         rs = self.rs
-        for m in self.scene.meshes:
+        # [[boats]] render like [[meshes]], placed at their starting pose; a bodies stage
+        # (lbm.bodies.Boats, app.boats) moves them by writing their transform rows
+        for m in (*self.scene.meshes, *self.scene.boats):
             V, F = load_mesh(m.file)
             normals = smooth_normals(V, F) if m.smooth else None
             groups = None if m.material else load_mesh_groups(m.file, len(F))
@@ -152,6 +156,8 @@ class _Builder:
                                    material=self.material("", TILES | {"specular": (0.2,) * 3}))
             inst = rs.add_instance(mesh, mesh_transform(V, m.position, m.rotation, m.size))
             self.instances[inst] = m.file.name
+            if m in self.scene.boats:
+                self.boat_instances.append(inst)
 
     def water(self, sim, water: WaterSpec) -> WaterSurface:
         import lbm
@@ -210,7 +216,8 @@ def assemble(scene: Scene, rt, *, cells: int | None = None, water_steps: int | N
     if not b.rs.meshes:
         raise InputError(f"{scene.path}: the scene has nothing to render (no [[meshes]], no "
                          "[water])")
-    return Assembly(b.rs, sim, surface, b.instances, caustic_box(scene, water, b.instances))
+    return Assembly(b.rs, sim, surface, b.instances, caustic_box(scene, water, b.instances),
+                    b.boat_instances)
 
 
 def caustic_box(scene: Scene, water: WaterSpec | None, instances: dict):

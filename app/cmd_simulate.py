@@ -4,7 +4,9 @@
 
 The .npz holds h, u, v, bed (ny, nx float32 arrays: depth m, velocity m/s along x and y, bed m),
 x (nx,) and y (ny,) cell-centre coordinates in m, time (s), dt (s), steps, and the guard's last
-report. Written atomically: on any error no file is left behind.
+report; with ``[[boats]]`` also boat_position (boats x 3, the centre of mass in world m),
+boat_rotation (boats x 4, quaternion w, x, y, z) and boat_names (the boats float on the water,
+coupled both ways, lbm.bodies). Written atomically: on any error no file is left behind.
 
 ``--vtk DIR --every K`` also writes the surface every K steps (and at the start and the end) as a
 ParaView time series ``DIR/water.pvd`` of structured grids with h, u, v, bed (app.vtk_output).
@@ -73,6 +75,13 @@ def run(args) -> int:
     except ValueError as exc:
         raise InputError(f"{scene.path}: [water]: {exc}") from None
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
+    boats = None
+    if scene.boats:
+        from app.boats import boat_bodies, make_boats
+
+        bodies = boat_bodies(scene)
+        boats = make_boats(scene, sim, bodies, rt.buffer(48 * len(bodies)),
+                           list(range(len(bodies))))
     log(f"{scene.name}: {sim.nx}x{sim.ny} cells of {sim.dx:g} m on {rt.name}; "
         f"e = {sim.e:.4g} m/s, dt = {sim.dt:.4g} s, tau = {sim.tau:.4g}")
     t0, done, stages, reports = time.perf_counter(), 0, {}, []
@@ -119,10 +128,15 @@ def run(args) -> int:
         log(f"wrote {vtk.pvd_path} ({len(vtk.entries)} surfaces)")
     if args.save is None:
         return 0
+    extra = {}
+    if boats is not None:
+        pos, quat = boats.poses()
+        extra = dict(boat_position=pos, boat_rotation=quat, boat_names=np.array(boats.names))
     with atomic_path(args.save) as tmp, open(tmp, "wb") as fh:
         np.savez_compressed(fh, h=f["h"], u=f["u"], v=f["v"], bed=f["bed"], x=x, y=y,
                             time=np.float64(sim.time), dt=np.float64(sim.dt),
-                            steps=np.int64(sim.steps), guard="\n".join(reports) or "ok")
+                            steps=np.int64(sim.steps), guard="\n".join(reports) or "ok",
+                            **extra)
     mlups = sim.nx * sim.ny * args.steps / max(stages.get("lbm.step", 0.0), 1e-9) / 1e3
     log(f"saved {args.save}: t = {sim.time:.6g} s after {sim.steps} steps in {wall:.2f} s; "
         f"lbm.step {stages.get('lbm.step', 0.0):.1f} ms ({mlups:.1f} MLUPs/s), "

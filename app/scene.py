@@ -268,6 +268,30 @@ MESH_SCHEMA = {
     "smooth": Field("bool", True, doc="interpolate area-weighted vertex normals"),
 }
 
+BOAT_SCHEMA = {
+    "file": Field("str", doc="OBJ/PLY/STL file rendered (relative to the scene, or scenes/models)"),
+    "hull": Field("str", "", doc="closed mesh for buoyancy, in the file's frame ('' : file, "
+                                 "which must then be closed)"),
+    "mass": Field("float", 0.0, lo=0.0, hi=1e9, unit="kg", doc="mass (or give density)"),
+    "density": Field("float", 0.0, lo=0.0, hi=1e5, unit="kg/m^3",
+                     doc="mass per m^3 of the hull's volume (or give mass)"),
+    "mass_height": Field("float", -1.0, lo=-1.0, hi=1e4, unit="m",
+                         doc="centre of mass above the hull's lowest point (ballast); "
+                             "-1: the uniform solid's centroid"),
+    "material": Field("str", "", doc="material name for the whole mesh ('' : MTL colours)"),
+    "materials": Field("table", None, doc="MTL material name -> scene material name"),
+    "position": Field("vec3", (0.0, 0.0, 0.0), lo=-1e6, hi=1e6, unit="m",
+                      doc="where the bottom centre of the bounding box starts (with size)"),
+    "rotation": Field("vec3", (0.0, 0.0, 0.0), lo=-360.0, hi=360.0, unit="deg",
+                      doc="rotation about x, then y, then z, at the start"),
+    "size": Field("float", 0.0, lo=0.0, hi=1e6, unit="m",
+                  doc="scale the largest extent to this; 0 keeps the file's units and origin"),
+    "smooth": Field("bool", True, doc="interpolate area-weighted vertex normals"),
+    "damping": Field("vec3", (2.0, 1.0, 2.0), lo=0.0, hi=1e3, unit="1/s",
+                     doc="heave, drift (towards the water's velocity), rotation: larger "
+                         "settles faster"),
+}
+
 POOL_SCHEMA = {
     "wall_height": Field("float", 0.7, lo=0.0, lo_open=True, hi=1e4, unit="m",
                          doc="wall top above the bed"),
@@ -348,6 +372,24 @@ class MeshSpec:
 
 
 @dataclass(frozen=True)
+class BoatSpec:
+    """A ``[[boats]]`` table: a floating rigid body (lbm.bodies) rendered as a mesh."""
+
+    file: Path
+    hull: Path | None
+    mass: float | None
+    density: float | None
+    mass_height: float | None
+    material: str
+    materials: dict
+    position: tuple
+    rotation: tuple
+    size: float
+    smooth: bool
+    damping: tuple
+
+
+@dataclass(frozen=True)
 class PoolSpec:
     wall_height: float
     deck: float
@@ -379,6 +421,7 @@ class Scene:
     meshes: tuple[MeshSpec, ...] = ()
     pool: PoolSpec | None = None
     timeline: tuple = ()   # [[timeline]] events sorted by time (app.timeline)
+    boats: tuple[BoatSpec, ...] = ()
 
 
 def _shading(value, src: SourceText, base: Path) -> ShadingSpec:
@@ -455,12 +498,39 @@ def _meshes(value, src: SourceText, base: Path) -> tuple:
     return tuple(out)
 
 
+def _boats(value, src: SourceText, base: Path) -> tuple:
+    if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+        raise InputError(f"{src.where('boats')}: use [[boats]] tables")
+    if len(value) > 16:
+        raise InputError(f"{src.where('boats')}: {len(value)} boats; at most 16")
+    out = []
+    for t in value:
+        v = validate_table(t, BOAT_SCHEMA, "boats", src, base)
+        v["file"] = _find_model(v["file"], base, src.where("boats", "file"))
+        v["hull"] = _find_model(v["hull"], base, src.where("boats", "hull")) if v["hull"] else None
+        if (v["mass"] > 0) == (v["density"] > 0):
+            raise InputError(f"{src.where('boats', 'mass')}: give exactly one of mass (kg) or "
+                             "density (kg/m^3), > 0")
+        v["mass"] = v["mass"] or None
+        v["density"] = v["density"] or None
+        if v["mass_height"] != -1.0 and v["mass_height"] < 0:
+            raise InputError(f"{src.where('boats', 'mass_height')}: mass_height = "
+                             f"{v['mass_height']:g}; use -1 (centroid) or a height >= 0 m")
+        v["mass_height"] = None if v["mass_height"] == -1.0 else v["mass_height"]
+        mats = v["materials"] or {}
+        if not all(isinstance(x, str) for x in mats.values()):
+            raise InputError(f"{src.where('boats', 'materials')}: values must be material names")
+        v["materials"] = dict(mats)
+        out.append(BoatSpec(**v))
+    return tuple(out)
+
+
 def _pool(value, src: SourceText, base: Path) -> PoolSpec:
     return PoolSpec(**validate_table(value, POOL_SCHEMA, "pool", src, base))
 
 
 SECTIONS.update({"shading": _shading, "sky": _sky, "lights": _lights, "materials": _materials,
-                 "meshes": _meshes, "pool": _pool})
+                 "meshes": _meshes, "pool": _pool, "boats": _boats})
 
 
 def check_material_names(scene: Scene) -> None:
@@ -468,9 +538,10 @@ def check_material_names(scene: Scene) -> None:
     known = set(scene.materials)
     where = f"{scene.path}"
     uses = []
-    for m in scene.meshes:
-        uses += [("meshes", "material", m.material)] if m.material else []
-        uses += [("meshes", "materials", x) for x in m.materials.values()]
+    for section, items in (("meshes", scene.meshes), ("boats", scene.boats)):
+        for m in items:
+            uses += [(section, "material", m.material)] if m.material else []
+            uses += [(section, "materials", x) for x in m.materials.values()]
     pool = scene.pool
     if pool is not None:
         uses += [("pool", k, getattr(pool, k)) for k in
@@ -479,6 +550,8 @@ def check_material_names(scene: Scene) -> None:
         if name not in known:
             raise InputError(f"{where}: [{section}] {key} names material {name!r}; defined: "
                              f"{', '.join(sorted(known)) or 'none'}")
+    if scene.boats and scene.water is None:
+        raise InputError(f"{where}: [[boats]] need a [water] section to float on")
     if pool is not None and scene.water is None:
         raise InputError(f"{where}: [pool] needs a [water] section (the pool's size and depth)")
 

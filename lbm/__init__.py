@@ -9,10 +9,11 @@
 See docs/lbm.md.
 """
 
+from lbm import bodies
 from lbm.lattice import Lattice, Options, choose_lattice
 from lbm.mesh import grid_triangles
 from lbm.solver import Boundary, ShallowWater, Storage
 from lbm.spec import from_water_spec
 
-__all__ = ["Boundary", "Lattice", "Options", "ShallowWater", "Storage", "choose_lattice",
+__all__ = ["bodies", "Boundary", "Lattice", "Options", "ShallowWater", "Storage", "choose_lattice",
            "from_water_spec", "grid_triangles"]

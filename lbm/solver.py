@@ -681,7 +681,9 @@ class ShallowWater:
         note = self._maybe_rechoose(out)
         if note:
             out["lattice"] = note
-            out["report"] = note if out["report"] == "ok" else out["report"] + "; " + note
+            parts = [p for p in out["report"].split("; ")
+                     if p != "ok" and not p.startswith("the water deepened")]
+            out["report"] = "; ".join(parts + [note])
         return out
 
     @property
@@ -735,8 +737,17 @@ class ShallowWater:
                          f"{out['max_froude']:.3g}), damped them locally; volume clipped "
                          f"{out['volume_clipped']:.3g} m^3, created {out['volume_created']:.3g}"
                          " m^3 so far")
+        mean = out["volume"] / (self.n_cells * self.dx**2)
+        if self.guard and mean > self._deepening_limit():
+            parts.append(f"the water deepened to {mean:.4g} m on average, past the depth the "
+                         "lattice was chosen for (stats() re-chooses it)")
         out["report"] = "; ".join(parts) if parts else "ok"
         return out
+
+    def _deepening_limit(self) -> float:
+        """Mean depth (m) past which the lattice is chosen again: midway between the depth it
+        was chosen for and its design depth."""
+        return 0.5 * (self._depth_chosen + self.lattice.design_depth)
 
     def _maybe_rechoose(self, s: dict) -> str | None:
         """When rain or drops have deepened the water past the depth the lattice was chosen for
@@ -747,7 +758,7 @@ class ShallowWater:
             return None
         lat = self.lattice
         mean = s["volume"] / (self.n_cells * self.dx**2)
-        if mean <= 0.5 * (self._depth_chosen + lat.design_depth):
+        if mean <= self._deepening_limit():
             return None
         f = self.fields()
         h = f["h"].astype(np.float64)

@@ -128,3 +128,85 @@ def test_clean_run_prints_no_warning(scene, tmp_path, capsys):
     assert main(["simulate", str(scene), "--steps", "30", "--save", str(tmp_path / "o.npz"),
                  "--quiet", "--strict"]) == 0
     assert capsys.readouterr().err == ""
+
+
+BOX_OBJ = """v -0.3 0 -0.15
+v -0.3 0 0.15
+v -0.3 0.2 -0.15
+v -0.3 0.2 0.15
+v 0.3 0 -0.15
+v 0.3 0 0.15
+v 0.3 0.2 -0.15
+v 0.3 0.2 0.15
+f 1 2 4
+f 1 4 3
+f 5 7 8
+f 5 8 6
+f 1 5 6
+f 1 6 2
+f 3 4 8
+f 3 8 7
+f 1 3 7
+f 1 7 5
+f 2 6 8
+f 2 8 4
+"""
+
+BOAT_SCENE = """
+[scene]
+name = "boat pool"
+
+[water]
+size = [1.6, 1.0]
+cells = [32, 20]
+depth = 0.3
+viscosity = 1e-3
+
+[[boats]]
+file = "box.obj"
+mass = 9.0
+mass_height = 0.05
+position = [0.8, 0.28, 0.5]
+rotation = [0.0, 30.0, 0.0]
+"""
+
+
+def test_simulate_floats_boats_and_saves_their_poses(tmp_path, capsys):
+    (tmp_path / "box.obj").write_text(BOX_OBJ)
+    path = tmp_path / "boat.toml"
+    path.write_text(BOAT_SCENE)
+    out = tmp_path / "o.npz"
+    assert main(["simulate", str(path), "--steps", "200", "--save", str(out), "--quiet"]) == 0
+    d = np.load(out)
+    assert d["boat_position"].shape == (1, 3) and d["boat_rotation"].shape == (1, 4)
+    assert list(d["boat_names"]) == ["[[boats]] #1 (box.obj)"]
+    q = d["boat_rotation"][0]
+    assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-5)
+    assert abs(q[2]) == pytest.approx(np.sin(np.radians(15)), abs=0.02)   # 30 deg about y kept
+    # 9 kg on a 0.6 x 0.3 box: draft 5 cm; the centre of mass 5 cm above the keel floats near the
+    # water line (0.3 m + the water it displaces over the pool)
+    assert d["boat_position"][0, 1] == pytest.approx(0.3 + 9 / 1000 / 1.6, abs=0.02)
+    assert np.isfinite(d["h"]).all()
+
+
+@pytest.mark.parametrize("change, match", [
+    ("mass = 9.0\n", r"give exactly one of mass \(kg\) or density"),
+    ("mass = 9.0\n", r"mass 300 kg sinks it"),
+    ("mass = 9.0\n", r"unknown key 'colour'"),
+    ('file = "box.obj"\n', r"file: the mesh is not closed"),
+])
+def test_bad_boats_are_one_line_errors(tmp_path, capsys, change, match):
+    (tmp_path / "box.obj").write_text(BOX_OBJ)
+    (tmp_path / "open.obj").write_text(BOX_OBJ.rsplit("f ", 1)[0])
+    replacement = {r"give exactly one of mass \(kg\) or density": "mass = 9.0\ndensity = 10.0\n",
+                   r"mass 300 kg sinks it": "mass = 300.0\n",
+                   r"unknown key 'colour'": "mass = 9.0\ncolour = 1\n",
+                   r"file: the mesh is not closed": 'file = "open.obj"\n'}[match]
+    path = tmp_path / "bad.toml"
+    path.write_text(BOAT_SCENE.replace(change, replacement))
+    out = tmp_path / "o.npz"
+    assert main(["simulate", str(path), "--steps", "5", "--save", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("lbwater simulate: error:")
+    assert re.search(match, err), err
+    assert not out.exists()

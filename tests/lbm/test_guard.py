@@ -140,11 +140,14 @@ def test_rain_deepening_the_water_rechooses_the_lattice(rt):
     said so), the water keeps its volume, and the budget still holds."""
     sim = lbm.ShallowWater(20, 20, 0.05, device=rt, depth=0.2, viscosity=1e-4)
     e0 = sim.e
-    sim.set_rain(2000.0, 0.15, 0.05, seed=1)
+    sim.set_rain(100.0, 0.25, 0.1, seed=1)
     notes = []
     for _ in range(30):
         sim.step(20)
+        g = sim.guard_record()   # a frame loop's view (guard_summary) warns; stats() acts
+        warned = "past the depth the lattice was chosen for" in sim.guard_summary(g, g)["report"]
         s = sim.stats()
+        assert warned == bool(s["lattice"])
         _assert_budget(s, rel=1e-5)
         if s["lattice"]:
             notes.append(s)
