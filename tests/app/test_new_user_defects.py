@@ -243,3 +243,20 @@ def test_bench_render_summary_is_readable():
     assert "trace 5.000" in line.split("slowest")[1]
     line = summary_line(row | {"size": 512, "seed_ms": 11.6, "speedup_fps": 0.9})
     assert "seed 11.6 ms, 0.9x" in line
+
+
+def test_no_opencl_runtime_at_all_is_one_line(monkeypatch, capsys):
+    """pyopencl (or its ICD loader) missing: one line, status 2."""
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_pyopencl(name, *args, **kwargs):
+        if name == "pyopencl" or name.startswith("pyopencl.") or name == "kernels":
+            raise ImportError("libOpenCL.so.1: cannot open shared object file", name="pyopencl")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_pyopencl)
+    assert main(["devices"]) == 2
+    err = _one_line_error(capsys.readouterr().err, "devices")
+    assert "pyopencl cannot be imported (libOpenCL.so.1" in err
