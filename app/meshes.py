@@ -212,7 +212,8 @@ def _read_with_pyvista(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
     if faces.size % 4 or np.any(faces.reshape(-1, 4)[:, 0] != 3):
         raise InputError(f"{path}: polygons left after triangulation (not a surface mesh?)")
     triangles = faces.reshape(-1, 4)[:, 1:].astype(np.uint32)
-    vertices = np.asarray(mesh.points, dtype=np.float32).reshape(-1, 3)
+    with np.errstate(over="ignore"):   # past float32's range: refused as non-finite below
+        vertices = np.asarray(mesh.points, dtype=np.float32).reshape(-1, 3)
     return vertices, triangles, int(tris.GetNumberOfPolys()) - len(triangles)
 
 
