@@ -205,7 +205,7 @@ def _read_with_pyvista(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
         raise InputError(f"{path}: cannot triangulate the mesh ({_vtk_problem(said) or error})")
     faces = np.asarray(mesh.faces)
     if faces.size == 0 and tris.GetNumberOfPolys() == 0:
-        raise InputError(f"{path}: no faces in the file (points or lines only)")
+        raise InputError(f"{path}: no triangles in the file (points or lines only)")
     if faces.size == 0:
         raise InputError(f"{path}: no triangles in the file ({tris.GetNumberOfPolys()} faces, "
                          "all degenerate once coincident points are merged)")
