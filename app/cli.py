@@ -89,6 +89,13 @@ def _main(argv: list[str]) -> int:
         status = args._run(args)
     except KeyboardInterrupt:
         raise
+    except ImportError as exc:   # no OpenCL runtime at all: pyopencl or its ICD loader missing
+        if (exc.name or "").split(".")[0] not in ("pyopencl", "pyvista", "vtk", "imageio"):
+            raise
+        msg, _ = _one_line(exc)
+        print(f"lbwater {args.command}: error: {exc.name} cannot be imported ({msg})",
+              file=sys.stderr)
+        return EXIT_INPUT
     except Exception as exc:
         try:
             user = isinstance(exc, _user_errors())

@@ -205,14 +205,15 @@ def _read_with_pyvista(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
         raise InputError(f"{path}: cannot triangulate the mesh ({_vtk_problem(said) or error})")
     faces = np.asarray(mesh.faces)
     if faces.size == 0 and tris.GetNumberOfPolys() == 0:
-        raise InputError(f"{path}: no faces in the file (points or lines only)")
+        raise InputError(f"{path}: no triangles in the file (points or lines only)")
     if faces.size == 0:
         raise InputError(f"{path}: no triangles in the file ({tris.GetNumberOfPolys()} faces, "
                          "all degenerate once coincident points are merged)")
     if faces.size % 4 or np.any(faces.reshape(-1, 4)[:, 0] != 3):
         raise InputError(f"{path}: polygons left after triangulation (not a surface mesh?)")
     triangles = faces.reshape(-1, 4)[:, 1:].astype(np.uint32)
-    vertices = np.asarray(mesh.points, dtype=np.float32).reshape(-1, 3)
+    with np.errstate(over="ignore"):   # past float32's range: refused as non-finite below
+        vertices = np.asarray(mesh.points, dtype=np.float32).reshape(-1, 3)
     return vertices, triangles, int(tris.GetNumberOfPolys()) - len(triangles)
 
 

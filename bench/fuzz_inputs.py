@@ -45,6 +45,8 @@ def main() -> int:
     rows = []
 
     def run(name, n, strategy, check):
+        if n <= 0:
+            return
         counts: collections.Counter = collections.Counter()
 
         @seed(run_seed)

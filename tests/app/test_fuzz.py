@@ -19,14 +19,14 @@ def CI(n: int) -> settings:
                                            HealthCheck.function_scoped_fixture])
 
 
-@CI(300)
+@CI(200)
 @given(content=fz.scene_texts(), extra=fz.RENDER_ARGS)
 def test_scene_files_give_one_line_and_status_2(content, extra):
     with fz.workdir() as d:
         fz.check_scene_cli(content, [w for pair in extra for w in pair], d)
 
 
-@CI(80)
+@CI(50)
 @given(case=fz.mesh_files)
 def test_mesh_files_load_or_give_one_line(case):
     with fz.workdir() as d:
