@@ -1,5 +1,5 @@
 """``lbwater bench bvh``: GPU LBVH build, refit and TLAS times and closest-hit ray rates on the
-exact workload of NVIDIA Warp's anchor script (``../shared/bench/warp_anchor.py``: height-field
+exact workload of NVIDIA Warp's anchor script (reproduced below; BENCHMARKS.md: height-field
 grids of n x n vertices, a 1920x1080 camera, 2^21 incoherent downward rays), build times of the
 seed's meshes, the device radix sort against ``pyopencl.algorithm.RadixSort``, and (where embreex is
 installed) Embree's single-thread ray rate on the same rays. On a CPU device it also times the other
@@ -27,7 +27,7 @@ import pyopencl as cl
 
 GRID_SIZES = (301, 1025, 2049)
 MESHES = ("dragon_100k.obj", "buddha_100k.obj", "utah_hand_00_handonly.obj")
-#: Warp 1.19 on an H100 (../shared/DESIGN.md): grid -> (lbvh build, refit, primary SAH,
+#: Warp 1.19 on an H100 (BENCHMARKS.md): grid -> (lbvh build, refit, primary SAH,
 #: incoherent SAH, primary LBVH, incoherent LBVH) in ms and Mrays/s.
 WARP_H100 = {
     301: {"build_ms": 0.36, "refit_ms": 0.089, "primary_sah": 5705, "incoherent_sah": 1227,

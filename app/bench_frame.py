@@ -4,9 +4,9 @@ resized, per stage from OpenCL events and as wall time per frame (FPS), warm-up 
 ``wall_ms`` is the throughput with frames in flight (the next frame enqueued before the last
 image is read, as the window and capture run); ``latency_ms`` one frame at a time.
 
-DESIGN.md's goal: a 1024^2 grid with a boat at 1920x1080, shadows, reflection and refraction,
->= 60 FPS on an H100. Every timed frame is checked: its image is finite and the water's guard
-reports no NaN, else the run fails.
+The goal (BENCHMARKS.md): a 1024^2 grid with a boat at 1920x1080, shadows, reflection and
+refraction, >= 60 FPS on an H100. Every timed frame is checked: its image is finite and the
+water's guard reports no NaN, else the run fails.
 """
 
 from __future__ import annotations

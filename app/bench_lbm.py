@@ -17,6 +17,11 @@ Correctness in the same run (the run fails, exit 1, when wrong): each variant an
 one step of a 96 x 64 grid against the float64 reference ``lbm.reference``, and every timed grid
 keeps its volume (relative drift <= 1e-5) with a clean guard report.
 
+Defaults suit the device: on a GPU grids 256^2..4096^2, 100 steps x 5 chains and a 256 MiB copy;
+on a CPU grids 64^2..256^2, 20 steps x 3 chains and a 64 MiB copy (about a minute on 2 cores).
+Each row is printed and lbm.json / lbm.csv are rewritten as it finishes, so an interrupted run
+keeps what it measured.
+
     lbwater bench lbm --sizes 256,512,1024 --steps 50 --repeats 5 --out out/bench
 """
 
@@ -31,6 +36,27 @@ import numpy as np
 
 BYTES_PER_CELL = {"flat": 72, "bed": 84}
 CHECK_TOL = 5e-6
+
+#: Defaults by device kind: a GPU run is the record; a CPU run must finish in about a minute.
+GPU_DEFAULTS = {"sizes": [256, 512, 1024, 2048, 4096], "steps": 100, "repeats": 5,
+                "bandwidth_mib": 256}
+CPU_DEFAULTS = {"sizes": [64, 128, 256], "steps": 20, "repeats": 3, "bandwidth_mib": 64}
+
+
+def _csv(values) -> str:
+    return ",".join(str(v) for v in values)
+
+
+def apply_device_defaults(args, is_gpu: bool) -> None:
+    """Fill every option left at None with the GPU's or the CPU's default."""
+    defaults = GPU_DEFAULTS if is_gpu else CPU_DEFAULTS
+    for key, value in defaults.items():
+        if getattr(args, key, None) is None:
+            setattr(args, key, value)
+
+
+def _ls_name(local_size) -> str:
+    return "auto" if local_size is None else f"{local_size[0]}x{local_size[1]}"
 
 
 def _int_list(text: str) -> list[int]:
@@ -89,17 +115,24 @@ def _positive(text: str) -> int:
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--sizes", type=_int_list, default=[256, 512, 1024, 2048, 4096],
-                   help="grid sizes n (n x n cells), comma-separated")
-    p.add_argument("--steps", type=_positive, default=100, help="steps per timed chain")
-    p.add_argument("--repeats", type=_positive, default=5, help="timed chains (median)")
+    p.add_argument("--sizes", type=_int_list, default=None,
+                   help="grid sizes n (n x n cells), comma-separated (default: GPU "
+                        f"{_csv(GPU_DEFAULTS['sizes'])}, CPU {_csv(CPU_DEFAULTS['sizes'])})")
+    p.add_argument("--steps", type=_positive, default=None,
+                   help=f"steps per timed chain (default: GPU {GPU_DEFAULTS['steps']}, "
+                        f"CPU {CPU_DEFAULTS['steps']})")
+    p.add_argument("--repeats", type=_positive, default=None,
+                   help=f"timed chains, median (default: GPU {GPU_DEFAULTS['repeats']}, "
+                        f"CPU {CPU_DEFAULTS['repeats']})")
     p.add_argument("--variants", type=_variants, default=["flat", "bed"],
                    help="flat and/or bed (uneven bed: the bed force and depth buffers)")
     p.add_argument("--local-sizes", type=_local_sizes, default=None,
                    help="work-groups of the step kernel to compare, e.g. 128x1,256x1,32x4,auto "
                         "(default: the solver's choice)")
-    p.add_argument("--bandwidth-mib", type=_positive, default=256,
-                   help="bytes copied by the bandwidth measurement, MiB (>= 256 for the record)")
+    p.add_argument("--bandwidth-mib", type=_positive, default=None,
+                   help="bytes copied by the bandwidth measurement, MiB (>= 256 for the record; "
+                        f"default: GPU {GPU_DEFAULTS['bandwidth_mib']}, "
+                        f"CPU {CPU_DEFAULTS['bandwidth_mib']})")
 
 
 def _state(n: int, dx: float, variant: str):
@@ -170,7 +203,7 @@ def bench_one(rt, n: int, variant: str, local_size, steps: int, repeats: int) ->
     lups = n * n / (step_ms * 1e-3)
     return {
         "n": n, "cells": n * n, "variant": variant,
-        "local_size": "auto" if local_size is None else f"{local_size[0]}x{local_size[1]}",
+        "local_size": _ls_name(local_size),
         "steps": steps, "repeats": repeats,
         "step_ms": step_ms, "step_ms_min": float(np.min(kernel)),
         "chain_ms": float(np.median(span)),
@@ -186,13 +219,16 @@ def bench_one(rt, n: int, variant: str, local_size, steps: int, repeats: int) ->
 def run(args) -> int:
     from pathlib import Path
 
-    from app.io import write_csv, write_json
     from kernels import get_runtime
     from kernels.bandwidth import measure_copy_bandwidth
 
     rt = get_runtime(args.device)
+    apply_device_defaults(args, rt.is_gpu)
     local_sizes = args.local_sizes or [None]
-    print(f"lbm bench on {rt.name} ({rt.device.platform.name.strip()})", file=sys.stderr)
+    out = Path(args.out)
+    print(f"lbm bench on {rt.name} ({rt.device.platform.name.strip()}): sizes "
+          f"{_csv(args.sizes)}, {args.steps} steps x {args.repeats} chains; writing "
+          f"{out / 'lbm.json'} as rows finish", file=sys.stderr)
     bw = measure_copy_bandwidth(rt, args.bandwidth_mib << 20)
     copy_gbps = bw["GBps"]
     print(f"copy bandwidth {copy_gbps:.1f} GB/s ({bw['bytes'] >> 20} MiB)", file=sys.stderr)
@@ -203,9 +239,9 @@ def run(args) -> int:
             err = check_step(rt, variant, ls)
             ok = err <= CHECK_TOL
             failed |= not ok
-            checks.append({"variant": variant, "local_size": str(ls), "max_abs_error": err,
+            checks.append({"variant": variant, "local_size": _ls_name(ls), "max_abs_error": err,
                            "pass": ok})
-            print(f"check {variant} {ls}: max |f - f_ref| = {err:.2e} "
+            print(f"check {variant} work-group {_ls_name(ls)}: max |f - f_ref| = {err:.2e} "
                   f"{'ok' if ok else 'FAILED'}", file=sys.stderr)
 
     rows = []
@@ -226,8 +262,18 @@ def run(args) -> int:
                       f"guard {r['guard_ms']:.3f} ms, surface {r['surface_ms']:.3f} ms "
                       f"[{time.perf_counter() - t0:.1f}s]{'' if r['ok'] else ' FAILED'}",
                       file=sys.stderr)
+                _write(out, rt, bw, checks, failed, rows)
 
-    out = Path(args.out)
+    _write(out, rt, bw, checks, failed, rows)
+    print(f"wrote {out / 'lbm.json'} and {out / 'lbm.csv'}"
+          + (" (FAILED: see the lines above)" if failed else ""), file=sys.stderr)
+    return 1 if failed else 0
+
+
+def _write(out, rt, bw: dict, checks: list, failed: bool, rows: list) -> None:
+    """lbm.json and lbm.csv with the rows so far (rewritten after each row)."""
+    from app.io import write_csv, write_json
+
     meta = {
         "bench": "lbm", "date": datetime.date.today().isoformat(),
         "command": "lbwater " + " ".join(sys.argv[1:]) if sys.argv else "",
@@ -236,6 +282,5 @@ def run(args) -> int:
         "copy_bandwidth": bw, "checks": checks, "failed": failed,
     }
     write_json(out / "lbm.json", {**meta, "rows": rows})
-    write_csv(out / "lbm.csv", rows)
-    print(f"wrote {out / 'lbm.json'} and {out / 'lbm.csv'}", file=sys.stderr)
-    return 1 if failed else 0
+    if rows:
+        write_csv(out / "lbm.csv", rows)

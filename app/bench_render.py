@@ -1,4 +1,4 @@
-"""Renderer benchmark: the seed's tables (DESIGN.md "Reference numbers") on its five scenes at
+"""Renderer benchmark: the seed's tables (BENCHMARKS.md, "Renderer") on its five scenes at
 512^2 and 1024^2 (per-stage ms from OpenCL events, secondary ray counts, total ms and FPS, the
 seed's numbers and our speed-up), and image error against a high-sample reference as samples per
 pixel grow, with time (CSV + chart).
@@ -18,7 +18,7 @@ import numpy as np
 
 SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
 
-#: The seed (2013 OpenCL tracer, GTX 590): ms per frame at 512^2 and 1024^2 (DESIGN.md).
+#: The seed (2013 OpenCL tracer, GTX 590): ms per frame at 512^2 and 1024^2 (BENCHMARKS.md).
 SEED_MS = {
     "hand": (11.6, 23.3),
     "human": (21.9, 31.9),
@@ -40,7 +40,8 @@ COLUMNS = {
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", nargs="+", default=list(SEED_MS), help="seed scene names")
+    p.add_argument("--scenes", nargs="+", default=list(SEED_MS), choices=list(SEED_MS),
+                   metavar="SCENE", help=f"seed scene names: {', '.join(SEED_MS)}")
     p.add_argument("--sizes", nargs="+", type=int, default=[512, 1024], help="square sizes")
     p.add_argument("--repeats", type=int, default=10, help="timed frames (median)")
     p.add_argument("--warmup", type=int, default=2, help="untimed frames first")
@@ -179,11 +180,7 @@ def run(args) -> int:
             row |= check
             row["stages_ms"] = {k: round(v, 4) for k, v in sorted(stages.items())}
             rows.append(row)
-            print(f"{name:7s} {size:5d}^2 wall {wall:8.3f} ms  ({1000 / wall:8.1f} FPS)  "
-                  f"kernels {gpu_total:8.3f} ms  enqueue {enqueue:6.3f} ms  "
-                  f"secondary {stats['secondary_rays']:9d}  seed {seed} ms  "
-                  f"x{row['speedup_fps']}  ls {best[0]} fused {best[1]}  {row['stages_ms']}",
-                  flush=True)
+            print(summary_line(row), flush=True)
             _write(out, rt, check_rt, date, args, rows, [])
     conv = _convergence(rt, args) if args.convergence_scene else []
     _write(out, rt, check_rt, date, args, rows, conv)
@@ -193,6 +190,19 @@ def run(args) -> int:
     print(f"wrote {out / 'render.json'}, render.csv"
           + (", render_convergence.csv/.png" if conv else ""))
     return 0
+
+
+def summary_line(row: dict) -> str:
+    """One readable line per timed scene and size: frame time, FPS, the seed's time and our
+    speed-up where the seed has one, the work-group chosen and the slowest stages."""
+    seed = (f"seed {row['seed_ms']:.1f} ms, {row['speedup_fps']:.1f}x faster"
+            if row.get("seed_ms") else "no seed number at this size")
+    stages = sorted(row["stages_ms"].items(), key=lambda kv: -kv[1])
+    top = ", ".join(f"{k.removeprefix('render.')} {v:.3f}" for k, v in stages[:4])
+    return (f"{row['scene']:7s} {row['size']:5d}^2: {row['wall_ms']:8.3f} ms/frame "
+            f"({row['fps']:.1f} FPS), kernels {row['kernel_total_ms']:.3f} ms, "
+            f"{row['secondary_rays']} secondary rays; {seed}; work-group {row['local_size']}"
+            f"{' fused' if row['fuse_trace_shade'] else ''}; slowest stages (ms): {top}")
 
 
 def _write(out: Path, rt, check_rt, date: str, args, rows: list, conv: list) -> None:

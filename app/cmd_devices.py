@@ -9,7 +9,7 @@ import json
 
 def add_arguments(p) -> None:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.add_argument("--device", help="mark the device this spec selects (gpu, cpu, P:D, name)")
+    p.add_argument("--device", help="mark the device this spec selects (gpu, cpu, pocl, P:D, name)")
 
 
 def run(args) -> int:
@@ -32,4 +32,5 @@ def run(args) -> int:
               f"work-group <= {r['max_work_group_size']}")
         print(f"        {r['opencl_version']}; driver {r['driver_version']}")
         print(f"        extensions: {', '.join(r['extensions']) or 'none of note'}")
+        print(f"        device fence: {r['device_fence']}")
     return 0

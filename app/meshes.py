@@ -4,12 +4,24 @@ Files are read with pyvista (imported only when needed: ``pv.read(path).triangul
 and the result is cached as ``.npz`` in a ``cache/`` folder beside the file (or, when that folder is
 not writable, in the user cache folder). A cache records the SHA-1 of the file it came from, so an
 edited file is re-read. Machines without pyvista (the GPU box) load the committed caches.
+
+What is refused, each with one line naming the file and the problem: a missing, empty or
+unreadable file (VTK's own first message, its log silenced), an OBJ face index that is 0, not an
+integer or out of range (with the line), any face whose vertex index is out of range (PLY, STL),
+NaN or infinite coordinates, a file with no triangles. What is repaired: polygons are split into
+triangles, and triangles that are degenerate (two corners the same vertex, also after coincident
+points are merged) are dropped; :func:`load_mesh` reports their count in ``report``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import logging
 import os
+import sys
+import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -39,50 +51,202 @@ def _read_cache(cache: Path, digest: str):
         with np.load(cache) as z:
             if str(z["sha1"]) != digest or int(z["version"]) != CACHE_VERSION:
                 return None
-            return z["vertices"].astype(np.float32), z["triangles"].astype(np.uint32)
+            dropped = int(z["dropped"]) if "dropped" in z.files else None
+            return z["vertices"].astype(np.float32), z["triangles"].astype(np.uint32), dropped
     except (OSError, KeyError, ValueError):
         return None
 
 
-def _write_cache(path: Path, digest: str, vertices: np.ndarray, triangles: np.ndarray) -> None:
+def _write_cache(path: Path, digest: str, vertices: np.ndarray, triangles: np.ndarray,
+                 dropped: int = 0) -> None:
     from app.io import atomic_path
 
     for cache in _cache_candidates(path):
         try:
             with atomic_path(cache, suffix=".partial.npz") as tmp:
                 np.savez_compressed(tmp, vertices=vertices, triangles=triangles,
-                                    sha1=np.array(digest), version=np.array(CACHE_VERSION))
+                                    sha1=np.array(digest), version=np.array(CACHE_VERSION),
+                                    dropped=np.array(dropped))
                 os.chmod(tmp, 0o644)
             return
-        except OSError:
+        except (OSError, InputError):  # a cache is optional
             continue
 
 
-def _read_with_pyvista(path: Path) -> tuple[np.ndarray, np.ndarray]:
+class _Collect(logging.Handler):
+    def __init__(self):
+        super().__init__()
+        self.messages: list[str] = []
+
+    def emit(self, record):
+        self.messages.append(record.getMessage())
+
+
+@contextlib.contextmanager
+def quiet_vtk():
+    """Silence VTK around a read and collect what it said: yields a list that receives its
+    messages (VTK's output window goes to Python's logging through pyvista, its warnings to
+    ``warnings``, and anything written straight to file descriptor 2 is captured too)."""
+    messages: list[str] = []
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
+    collect = _Collect()
+    root.handlers[:] = [collect]
+    sys.stderr.flush()
+    saved_fd = os.dup(2)
+    with tempfile.TemporaryFile() as err, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        os.dup2(err.fileno(), 2)
+        try:
+            yield messages
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved_fd, 2)
+            os.close(saved_fd)
+            root.handlers[:] = handlers
+            root.setLevel(level)
+            err.seek(0)
+            raw = err.read().decode("utf-8", "replace").splitlines()
+            messages += collect.messages + [str(w.message) for w in caught] + raw
+
+
+def _vtk_problem(messages: list[str]) -> str:
+    """The first specific thing VTK said, on one line (its messages carry multi-line object
+    dumps; "Algorithm vtkXReader (0x...) returned failure" says only that the reader failed)."""
+    import re
+
+    generic = ""
+    for m in messages:
+        m = re.sub(r"\x1b\[[0-9;]*m", "", m)            # vtkLogger's colours
+        line = m.strip().splitlines()[0].strip() if m.strip() else ""
+        line = re.sub(r"^.*?\b(WARN|ERR|ERROR|INFO)\|\s*", "", line)   # and its prefix
+        line = re.sub(r"\s*\(0x[0-9a-f]+\)", "", line)[:200]
+        if not line:
+            continue
+        if re.match(r"Algorithm \w+ returned failure", line) or "raised an error" in line:
+            generic = generic or f"{line.split()[1]} failed"
+            continue
+        return line
+    return generic
+
+
+def check_obj_indices(path: Path) -> None:
+    """One-line InputError for the first OBJ face index that is not an integer, is 0 or lies
+    outside the file's vertices (VTK would read past its vertex array)."""
+    n_vertices, faces = 0, []
+    with open(path, "rb") as fh:
+        for lineno, raw in enumerate(fh, 1):
+            if raw.startswith(b"v ") or raw.startswith(b"v\t"):
+                n_vertices += 1
+            elif raw.startswith(b"f ") or raw.startswith(b"f\t"):
+                faces.append((lineno, n_vertices, raw.split()[1:]))
+    for lineno, seen, words in faces:
+        for w in words:
+            head = w.split(b"/")[0]
+            try:
+                i = int(head)
+            except ValueError:
+                raise InputError(f"{path}:{lineno}: face index {head.decode(errors='replace')!r}"
+                                 " is not an integer") from None
+            j = i - 1 if i > 0 else seen + i   # 1-based, or relative to the vertices so far
+            if i == 0 or not 0 <= j < n_vertices:
+                raise InputError(f"{path}:{lineno}: face index {i} is out of range "
+                                 f"(the file has {n_vertices} vertices; OBJ counts from 1)")
+
+
+def _check_cell_indices(path: Path, data) -> None:
+    """Every cell of ``data`` (VTK PolyData) names existing points; VTK keeps out-of-range ids
+    that later filters would read past the point array with."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    for cells in (data.GetPolys(), data.GetStrips(), data.GetLines(), data.GetVerts()):
+        conn = vtk_to_numpy(cells.GetConnectivityArray()) if cells is not None else None
+        if conn is not None and conn.size and (conn.min() < 0 or conn.max() >= data.n_points):
+            raise InputError(f"{path}: a face names vertex {int(conn.max())} (0-based) but the "
+                             f"file has {data.n_points} vertices")
+
+
+def _read_with_pyvista(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
+    """Vertices, triangles and the number of degenerate triangles dropped."""
     try:
         import pyvista as pv
     except ImportError:
         raise InputError(f"{path}: reading meshes needs pyvista (pip install pyvista), and no "
                          "up-to-date .npz cache was found beside it") from None
-    try:
-        data = pv.read(str(path))
-    except Exception as exc:  # vtk raises many kinds; the user needs one line
-        raise InputError(f"{path}: unreadable mesh ({type(exc).__name__}: {exc})") from None
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: the file is empty")
+    if path.suffix.lower() == ".obj":
+        check_obj_indices(path)
+    with quiet_vtk() as said:
+        try:
+            data = pv.read(str(path))
+            error = None
+        except Exception as exc:  # vtk raises many kinds; the user needs one line
+            data, error = None, f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}" \
+                if str(exc).strip() else type(exc).__name__
+    problem = _vtk_problem(said)
+    if data is None:
+        raise InputError(f"{path}: unreadable mesh ({problem or error})")
     if not isinstance(data, pv.PolyData):
-        data = data.extract_surface()
+        with quiet_vtk():
+            data = data.extract_surface()
     if data.n_cells == 0:
-        raise InputError(f"{path}: no triangles in the file")
+        raise InputError(f"{path}: no triangles in the file" + (f" ({problem})" if problem else ""))
+    _check_cell_indices(path, data)
     # clean() merges coincident points; triangles that collapse become lines or points and are
     # moved out of `faces`, so what is left in `faces` is a valid triangle list.
-    mesh = data.triangulate().clean()
+    with quiet_vtk() as said:
+        try:
+            tris = data.triangulate()
+            mesh = tris.clean()
+        except Exception as exc:  # noqa: BLE001 (vtk raises many kinds)
+            mesh, error = None, type(exc).__name__
+    if mesh is None:
+        raise InputError(f"{path}: cannot triangulate the mesh ({_vtk_problem(said) or error})")
     faces = np.asarray(mesh.faces)
+    if faces.size == 0 and tris.GetNumberOfPolys() == 0:
+        raise InputError(f"{path}: no faces in the file (points or lines only)")
     if faces.size == 0:
-        raise InputError(f"{path}: no triangles in the file (after merging coincident points)")
+        raise InputError(f"{path}: no triangles in the file ({tris.GetNumberOfPolys()} faces, "
+                         "all degenerate once coincident points are merged)")
     if faces.size % 4 or np.any(faces.reshape(-1, 4)[:, 0] != 3):
         raise InputError(f"{path}: polygons left after triangulation (not a surface mesh?)")
     triangles = faces.reshape(-1, 4)[:, 1:].astype(np.uint32)
     vertices = np.asarray(mesh.points, dtype=np.float32).reshape(-1, 3)
-    return vertices, triangles
+    return vertices, triangles, int(tris.GetNumberOfPolys()) - len(triangles)
+
+
+_READER = None   # a one-process pool that reads mesh files with VTK, made on first use
+
+
+def _ignore_sigint() -> None:
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C is the parent's to report
+
+
+def _read_isolated(path: Path) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`_read_with_pyvista` in a separate process: VTK's readers crash (segfault) on some
+    malformed files (the fuzzer found PLY files with negative face indices or a truncated
+    binary body), and a crash there must be a one-line error here, not the end of the program.
+    """
+    global _READER
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    if _READER is None:
+        import atexit
+
+        _READER = ProcessPoolExecutor(max_workers=1, initializer=_ignore_sigint,
+                                      mp_context=multiprocessing.get_context("spawn"))
+        atexit.register(_READER.shutdown)   # before the interpreter tears the module down
+    try:
+        return _READER.submit(_read_with_pyvista, path).result()
+    except BrokenProcessPool:
+        _READER = None
+        raise InputError(f"{path}: the mesh reader (VTK) crashed on this file: it is malformed "
+                         f"or not a {path.suffix.lstrip('.').upper() or 'mesh'} file") from None
 
 
 def validate_mesh(vertices: np.ndarray, triangles: np.ndarray, name: str = "mesh"
@@ -97,12 +261,16 @@ def validate_mesh(vertices: np.ndarray, triangles: np.ndarray, name: str = "mesh
         raise InputError(str(exc)) from None
 
 
-def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+def load_mesh(path: str | os.PathLike, report: dict | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
     """Vertices float32 (n,3) and triangles uint32 (m,3) of the mesh file ``path``.
 
     A bare name (``"dragon_100k.obj"``) is looked up in ``scenes/models/`` when it is not a file
-    in the working folder. Results are cached (see the module docstring).
+    in the working folder. Results are cached (see the module docstring). ``report``, when
+    given, receives ``dropped_degenerate``: the degenerate triangles dropped (None when the
+    mesh came from a cache written before that count was kept).
     """
+    report = {} if report is None else report
     path = Path(path)
     if not path.is_file() and not path.is_absolute() and (MODELS_DIR / path).is_file():
         path = MODELS_DIR / path
@@ -113,17 +281,19 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         if cache.is_file():
             hit = _read_cache(cache, digest)
             if hit is not None:
-                return validate_mesh(*hit, name=str(path))
-    vertices, triangles = _read_with_pyvista(path)
+                report["dropped_degenerate"] = hit[2]
+                return validate_mesh(*hit[:2], name=str(path))
+    vertices, triangles, dropped = _read_isolated(path)
     vertices, triangles = validate_mesh(vertices, triangles, name=str(path))
-    _write_cache(path, digest, vertices, triangles)
+    _write_cache(path, digest, vertices, triangles, dropped)
+    report["dropped_degenerate"] = dropped
     return vertices, triangles
 
 
 def height_field_grid(n: int, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """The BVH benchmark's water-like height field, exactly as NVIDIA Warp's anchor script
-    (``../shared/bench/warp_anchor.py`` grid()): n x n vertices over [-1,1]^2, 2 (n-1)^2
-    triangles; ``t`` shifts the waves (a deformed grid of the same topology)."""
+    """The BVH benchmark's water-like height field, exactly as NVIDIA Warp's anchor script's
+    grid() (``app.bench_bvh``): n x n vertices over [-1,1]^2, 2 (n-1)^2 triangles; ``t`` shifts
+    the waves (a deformed grid of the same topology)."""
     x = np.linspace(-1, 1, n, dtype=np.float32)
     X, Z = np.meshgrid(x, x)
     Y = 0.03 * np.sin(9 * X + t) * np.cos(7 * Z) + 0.01 * np.sin(31 * (X + Z))
@@ -189,7 +359,8 @@ def load_mesh_groups(path: Path, n_tris: int):
     except ImportError:
         raise InputError(f"{path}: material groups need pyvista or an up-to-date cache "
                          f"{cache}") from None
-    mesh = pv.read(str(path)).triangulate().clean()
+    with quiet_vtk():
+        mesh = pv.read(str(path)).triangulate().clean()
     if "MaterialIds" not in mesh.cell_data or mesh.n_cells != n_tris:
         return None
     ids = np.asarray(mesh.cell_data["MaterialIds"], np.int32)
@@ -197,7 +368,7 @@ def load_mesh_groups(path: Path, n_tris: int):
     try:
         with atomic_path(cache, suffix=".partial.npz") as tmp:
             np.savez_compressed(tmp, ids=ids, names=np.array(names), sha1=np.array(digest))
-    except OSError:
+    except (OSError, InputError):
         pass
     return ids, names
 

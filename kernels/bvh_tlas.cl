@@ -2,25 +2,29 @@
      bvh_reset_info (bvh_build.cl) -> tlas_prep -> bvh_box_morton -> sort -> bvh_hierarchy_boxes
    Leaves hold one instance each; tlas_prims (the sorted order) maps a leaf to its instance id. */
 #include "bvh_hierarchy.h"
+#include "transform.h"
 
-/* Instance records and world boxes from world_from_object transforms (3 float4 rows each:
-   xyz = the 3x3 part, w = translation) and each mesh's BLAS header (root and object box). The
+/* Instance records, normal transforms and world boxes from the scene's transform buffer (one
+   Transform row per instance: world_from_object, xyz = the 3x3 part, w = translation; written
+   by the host or by a device stage) and each mesh's BLAS header (root and object box). The
    BLAS root is the binary root of the header, or with `wide` the mesh's wide root. The
-   inverse is computed here in float with cofactors; the host rejects singular transforms. The
-   world box is Arvo's transformed box, widened by a few ulps of its magnitude so rounding never
-   makes it smaller than the moved geometry. */
+   inverse is computed here in float with cofactors; the host rejects singular transforms (a
+   device writer must not write one). normals[i]: the inverse transpose of the 3x3 part (w = 0),
+   the shading normals' transform. The world box is Arvo's transformed box, widened by a few ulps
+   of its magnitude so rounding never makes it smaller than the moved geometry. */
 __kernel __attribute__((reqd_work_group_size(BOUNDS_WG, 1, 1)))
-void tlas_prep(int n_inst, __global const float4* restrict xforms,
+void tlas_prep(int n_inst, __global const Transform* restrict xforms,
                __global const int* restrict inst_mesh, __global const int* restrict mesh_prim_base,
                __global const BvhInfo* restrict blas_infos,
                __global const int* restrict mesh_wide_root, int wide,
-               __global Instance* restrict instances,
+               __global Instance* restrict instances, __global Transform* restrict normals,
                __global float4* restrict boxes, __global BvhInfo* tlas_info) {
     __local float lmin[3 * BOUNDS_WG], lmax[3 * BOUNDS_WG];
     int i = get_global_id(0);
     float3 cmin = (float3)(INFINITY), cmax = (float3)(-INFINITY);
     if (i < n_inst) {
-        float4 r0 = xforms[3 * i], r1 = xforms[3 * i + 1], r2 = xforms[3 * i + 2];
+        const Transform x = xforms[i];
+        const float4 r0 = x.r0, r1 = x.r1, r2 = x.r2;
         int mesh = inst_mesh[i];
         BvhInfo bi = blas_infos[mesh];
         /* inverse of the 3x3 part: adjugate / determinant */
@@ -40,6 +44,12 @@ void tlas_prep(int n_inst, __global const float4* restrict xforms,
         ins.prim_base = mesh_prim_base[mesh];
         ins.pad = 0;
         instances[i] = ins;
+        /* inverse transpose: its rows are the columns of the inverse, i.e. cofactors / det */
+        Transform nx;
+        nx.r0 = (float4)(c0 * inv_det, 0.0f);
+        nx.r1 = (float4)(c1 * inv_det, 0.0f);
+        nx.r2 = (float4)(c2 * inv_det, 0.0f);
+        normals[i] = nx;
         float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
         if (bi.root >= 0) {
             float3 c = 0.5f * (bi.lo.xyz + bi.hi.xyz), e = 0.5f * (bi.hi.xyz - bi.lo.xyz);

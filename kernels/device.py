@@ -2,8 +2,10 @@
 
 A device is named by a *spec*: ``"gpu"``, ``"cpu"``, ``"P:D"`` (platform and device index, as in
 ``PYOPENCL_CTX``), ``"P"`` or a case-insensitive substring of the platform or device name
-(``"pocl"``, ``"nvidia"``, ``"h100"``). The spec comes from the caller (``--device``), else
-``LBWATER_DEVICE``, else ``PYOPENCL_CTX``, else the default order.
+(``"nvidia"``, ``"h100"``), or a vendor alias from :data:`ALIASES` (``"pocl"`` names the platform
+"Portable Computing Language" whose devices are called "pthread-<cpu>"; ``"cuda"`` names NVIDIA's).
+The spec comes from the caller (``--device``), else ``LBWATER_DEVICE``, else ``PYOPENCL_CTX``, else
+the default order.
 """
 
 from __future__ import annotations
@@ -23,6 +25,24 @@ RELEVANT_EXTENSIONS = (
     "cl_khr_subgroups",
     "cl_nv_device_attribute_query",
 )
+
+
+#: Vendor and driver names users type -> substrings of the platform's name or vendor that mean
+#: it (lower case). A spec that is a key matches platforms by these terms, then, like any other
+#: spec, platforms and devices whose names contain it.
+ALIASES = {
+    "pocl": ("portable computing language", "pocl"),
+    "portable": ("portable computing language",),
+    "nvidia": ("nvidia",),
+    "cuda": ("nvidia",),
+    "intel": ("intel(r) opencl", "intel(r) corporation", "intel"),
+    "oneapi": ("intel(r) opencl",),
+    "amd": ("amd accelerated parallel processing", "advanced micro devices", "amd"),
+    "rocm": ("amd accelerated parallel processing", "advanced micro devices"),
+    "apple": ("apple",),
+    "rusticl": ("rusticl",),
+    "mesa": ("rusticl", "clover", "mesa"),
+}
 
 
 class DeviceError(ValueError):
@@ -45,6 +65,7 @@ class DeviceInfo:
     opencl_version: str
     driver_version: str
     extensions: tuple[str, ...]
+    device_fence: str
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -95,7 +116,70 @@ def describe(spec: str, platform: cl.Platform, device: cl.Device) -> DeviceInfo:
         opencl_version=device.version.strip(),
         driver_version=device.driver_version.strip(),
         extensions=tuple(e for e in RELEVANT_EXTENSIONS if e in exts),
+        device_fence=FENCE_DOC[fence_kind(device)],
     )
+
+
+#: What kernels/common.h's DEVICE_FENCE() is on a device, by :func:`fence_kind`.
+FENCE_DOC = {
+    "membar": "membar.gl (PTX, NVIDIA)",
+    "atomic_fence": "atomic_work_item_fence(global, acq_rel, device scope)",
+    "mem_fence": "mem_fence (OpenCL 1.2; not a device-scope fence)",
+}
+
+_FENCE_FEATURES = ("__opencl_c_atomic_order_acq_rel", "__opencl_c_atomic_scope_device")
+
+
+def _c_versions(device: cl.Device) -> list[tuple[int, int]]:
+    """OpenCL C versions the device compiles, as (major, minor)."""
+    out = []
+    try:
+        for v in device.opencl_c_all_versions:  # OpenCL 3.0 devices
+            out.append((v.version >> 22, (v.version >> 12) & 0x3FF))
+    except (cl.Error, AttributeError):
+        pass
+    try:
+        text = device.opencl_c_version.split()[2]  # "OpenCL C 1.2 ..."
+        major, minor = text.split(".")[:2]
+        out.append((int(major), int(minor)))
+    except (cl.Error, AttributeError, IndexError, ValueError):
+        pass
+    return out
+
+
+def _c_features(device: cl.Device) -> set[str]:
+    try:
+        return {f.name for f in device.opencl_c_features}
+    except (cl.Error, AttributeError):
+        return set()
+
+
+def fence_kind(device: cl.Device) -> str:
+    """How DEVICE_FENCE() is made on ``device`` (a key of :data:`FENCE_DOC`).
+
+    NVIDIA: PTX ``membar.gl`` (measured sufficient, BENCHMARKS.md). Otherwise OpenCL C 3.0 with
+    the acq_rel order and device scope features, or OpenCL C 2.x: ``atomic_work_item_fence``.
+    Otherwise only OpenCL 1.2's ``mem_fence``, which does not promise that stores reach other
+    work-groups before a following atomic (see kernels/common.h for what that means)."""
+    if "nvidia" in device.platform.name.lower():
+        return "membar"
+    versions = _c_versions(device)
+    if any(v >= (3, 0) for v in versions) and set(_FENCE_FEATURES) <= _c_features(device):
+        return "atomic_fence"
+    if any((2, 0) <= v < (3, 0) for v in versions):
+        return "atomic_fence"
+    return "mem_fence"
+
+
+def cl_std_option(device: cl.Device) -> str:
+    """The ``-cl-std=`` build option for ``device``: CL3.0 or CL2.0 where DEVICE_FENCE needs
+    their atomic fence, else CL1.2 (NVIDIA stays on CL1.2 with its PTX fence)."""
+    if fence_kind(device) != "atomic_fence":
+        return "-cl-std=CL1.2"
+    versions = _c_versions(device)
+    if any(v >= (3, 0) for v in versions) and set(_FENCE_FEATURES) <= _c_features(device):
+        return "-cl-std=CL3.0"
+    return "-cl-std=CL2.0"
 
 
 def list_devices() -> list[DeviceInfo]:
@@ -123,8 +207,15 @@ def _match(spec: str, candidates):
         if len(head) == 1 or head[1] == "":
             return [c for c in candidates if c[0].split(":")[0] == head[0]]
         return [c for c in candidates if c[0] == f"{int(head[0])}:{int(head[1])}"]
-    return [c for c in candidates
-            if s in c[1].name.lower() or s in c[2].name.lower()]
+    by_platform = [c for c in candidates if _platform_matches(s, c[1])]
+    by_device = [c for c in candidates if c not in by_platform and s in c[2].name.lower()]
+    return by_platform + by_device
+
+
+def _platform_matches(spec: str, platform: cl.Platform) -> bool:
+    """``spec`` names this platform: part of its name, or an alias of its name or vendor."""
+    text = f"{platform.name} {platform.vendor}".lower()
+    return spec in platform.name.lower() or any(t in text for t in ALIASES.get(spec, ()))
 
 
 def resolve_spec(spec: str | None = None) -> tuple[str, str]:
@@ -148,5 +239,6 @@ def select_device(spec: str | None = None) -> cl.Device:
     if not matches:
         names = ", ".join(f"{c[0]} {c[2].name.strip()}" for c in candidates)
         raise DeviceError(f"no OpenCL device matches {origin}={spec!r}; available: {names} "
-                          "(use gpu, cpu, P:D or part of a name)")
+                          "(use gpu, cpu, P:D, a vendor such as pocl, nvidia, intel, amd, "
+                          "or part of a name)")
     return matches[0][2]

@@ -6,18 +6,21 @@
 
 #include "render_optics.h"
 #include "scene.h"
+#include "transform.h"
 
-/* The renderer's shading data, in this order (raytrace.render_scene.RenderScene.shade_args()):
- * instances, meshes, positions (float4, input order), normals (float4), uvs (float2),
+/* The renderer's shading data (raytrace.render_scene.RenderScene.shade_bindings()): instances,
+ * their world_from_object rows (the scene's transform buffer) and normal transforms (written
+ * by tlas_prep), meshes, positions (float4, input order), normals (float4), uvs (float2),
  * triangles (uint x3, input order), per-triangle material ids, materials, textures, texels. */
 #define RENDER_GEOM_PARAMS                                                                     \
-    __global const InstanceInfo* restrict g_inst, __global const MeshInfo* restrict g_mesh,   \
+    __global const InstanceInfo* restrict g_inst, __global const Transform* restrict g_xform, \
+    __global const Transform* restrict g_nxform, __global const MeshInfo* restrict g_mesh,    \
     __global const float4* restrict g_pos, __global const float4* restrict g_nrm,             \
     __global const float2* restrict g_uv, __global const uint* restrict g_tri,                \
     __global const ushort* restrict g_tri_mat, __global const Material* restrict g_mat,       \
     __global const TexInfo* restrict g_tex, __global const float4* restrict g_texels
 
-#define RENDER_GEOM_ARGS g_inst, g_mesh, g_pos, g_nrm, g_uv, g_tri, g_tri_mat, g_mat, g_tex, g_texels
+#define RENDER_GEOM_ARGS g_inst, g_xform, g_nxform, g_mesh, g_pos, g_nrm, g_uv, g_tri, g_tri_mat, g_mat, g_tex, g_texels
 
 typedef struct {
     float3 p;       /* world position from the barycentrics */
@@ -27,15 +30,15 @@ typedef struct {
     int material;
 } Surface;
 
-inline float3 xform_point(const float4* m, float3 p)
+inline float3 xform_point(const Transform m, float3 p)
 {
-    return (float3)(dot(m[0].xyz, p) + m[0].w, dot(m[1].xyz, p) + m[1].w,
-                    dot(m[2].xyz, p) + m[2].w);
+    return (float3)(dot(m.r0.xyz, p) + m.r0.w, dot(m.r1.xyz, p) + m.r1.w,
+                    dot(m.r2.xyz, p) + m.r2.w);
 }
 
-inline float3 xform_vector(const float4* m, float3 v)
+inline float3 xform_vector(const Transform m, float3 v)
 {
-    return (float3)(dot(m[0].xyz, v), dot(m[1].xyz, v), dot(m[2].xyz, v));
+    return (float3)(dot(m.r0.xyz, v), dot(m.r1.xyz, v), dot(m.r2.xyz, v));
 }
 
 inline Surface surface_at(RENDER_GEOM_PARAMS, int inst, int prim, float u, float v)
@@ -49,14 +52,15 @@ inline Surface surface_at(RENDER_GEOM_PARAMS, int inst, int prim, float u, float
     const uint i2 = m.vert_offset + g_tri[3 * t + 2];
     const float3 p0 = g_pos[i0].xyz, p1 = g_pos[i1].xyz, p2 = g_pos[i2].xyz;
     const float w = 1.0f - u - v;
-    s.p = xform_point(in.world_from_object, w * p0 + u * p1 + v * p2);
-    s.ng = normalize(xform_vector(in.normal_from_object, cross(p1 - p0, p2 - p0)));
+    const Transform nx = g_nxform[inst];
+    s.p = xform_point(g_xform[inst], w * p0 + u * p1 + v * p2);
+    s.ng = normalize(xform_vector(nx, cross(p1 - p0, p2 - p0)));
     s.ns = s.ng;
     if (m.flags & MESH_HAS_NORMALS) {
         const float3 n = w * g_nrm[i0].xyz + u * g_nrm[i1].xyz + v * g_nrm[i2].xyz;
         const float len2 = dot(n, n);
         if (len2 > 1e-20f) {
-            const float3 ns = normalize(xform_vector(in.normal_from_object, n));
+            const float3 ns = normalize(xform_vector(nx, n));
             s.ns = dot(ns, s.ng) >= 0.0f ? ns : -ns;
         }
     }

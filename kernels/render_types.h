@@ -99,10 +99,9 @@ typedef struct {
     uint flags;         /* MESH_* */
 } MeshInfo;
 
-/* 112 bytes. An instance's transforms (rows of 3x4 matrices) and what it draws. */
+/* 16 bytes. What an instance draws; its transforms live once, in the scene's transform buffer
+ * (g_xform) and the normal rows the TLAS build derives from it (g_nxform). */
 typedef struct {
-    float4 world_from_object[3];
-    float4 normal_from_object[3]; /* inverse transpose of the linear part, rows */
     uint mesh;
     int material;       /* overrides the mesh's materials when >= 0 */
     uint pad0, pad1;

@@ -10,13 +10,17 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import signal
+import sys
+import tempfile
+import threading
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
 
-from kernels.device import select_device
+from kernels.device import cl_std_option, select_device
 from kernels.timing import StageTimer
 
 KERNEL_DIR = Path(__file__).resolve().parent
@@ -35,7 +39,66 @@ def check_bvh_layout(layout: str) -> str:
 
 
 class KernelBuildError(RuntimeError):
-    """A ``.cl`` program failed to compile; the message names the file and carries the log."""
+    """A ``.cl`` program failed to compile. The first line names the file, the device and the
+    file the build log was written to; the log follows on the next lines."""
+
+
+#: Seconds a build may take before the one-line "building kernels" note is printed (a build from
+#: the driver's cache takes a few ms to ~0.1 s; a real build of a large program ~1 s on 2 cores).
+BUILD_NOTE_AFTER_S = 0.5
+_build_note_shown = False
+
+
+def driver_cache_dir(device: cl.Device) -> str:
+    """Where ``device``'s compiled programs are cached between runs (the driver's own cache for
+    PoCL and NVIDIA, which pyopencl relies on; pyopencl's binary cache otherwise)."""
+    home = Path.home()
+    xdg = Path(os.environ.get("XDG_CACHE_HOME") or home / ".cache")
+    platform = device.platform.name.lower()
+    if "portable computing language" in platform:
+        return os.environ.get("POCL_CACHE_DIR") or str(xdg / "pocl" / "kcache")
+    if "nvidia" in platform:
+        return os.environ.get("CUDA_CACHE_PATH") or str(home / ".nv" / "ComputeCache")
+    return str(xdg / "pyopencl")
+
+
+@contextlib.contextmanager
+def _build_guard(device: cl.Device):
+    """Around a program build: print a one-line note when it is slow (not cached), and hold a
+    Ctrl-C until the compiler returns (an interrupted compiler prints stray error lines); the
+    interrupt is raised right after."""
+    global _build_note_shown
+
+    def note():
+        global _build_note_shown
+        if not _build_note_shown:
+            _build_note_shown = True
+            print(f"lbwater: building kernels (first run only; cache: "
+                  f"{driver_cache_dir(device)})", file=sys.stderr, flush=True)
+
+    timer = None if _build_note_shown else threading.Timer(BUILD_NOTE_AFTER_S, note)
+    if timer is not None:
+        timer.daemon = True
+        timer.start()
+    main = threading.current_thread() is threading.main_thread()
+    blocked = main and hasattr(signal, "pthread_sigmask")
+    if blocked:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        if timer is not None:
+            timer.cancel()
+        if blocked:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+def _write_build_log(source: str, device_name: str, options: list[str], log: str) -> Path:
+    """The build log in a file (the CLI prints only its path); returns the path."""
+    fd, name = tempfile.mkstemp(prefix=f"lbwater-build-{Path(source).stem}-", suffix=".log")
+    with os.fdopen(fd, "w") as fh:
+        fh.write(f"{source} on {device_name}\noptions: {' '.join(options)}\n\n{log}\n")
+    return Path(name)
 
 
 def _source_hash() -> str:
@@ -104,7 +167,7 @@ class Runtime:
         if not path.is_file():
             raise KernelBuildError(f"kernel source {path} does not exist")
         options = [f"-I{KERNEL_DIR}", f"-DLBWATER_SRC_HASH=0x{self._hash}",
-                   "-cl-std=CL1.2"]
+                   cl_std_option(self.device)]  # common.h: DEVICE_FENCE
         if self.kernel_arg_info:
             options.append("-cl-kernel-arg-info")
         if "nvidia" in self.device.platform.name.lower():
@@ -114,14 +177,16 @@ class Runtime:
         try:
             # The source is handed over as a string, so a compiler resolves `#include "x.h"`
             # against the working directory before -I: build from the kernel folder itself.
-            with warnings.catch_warnings(), contextlib.chdir(KERNEL_DIR):
+            with warnings.catch_warnings(), contextlib.chdir(KERNEL_DIR), \
+                    _build_guard(self.device):
                 warnings.simplefilter("ignore", cl.CompilerWarning)
                 prg = cl.Program(self.context, text).build(options=options)
         except cl.RuntimeError as exc:
             log = str(exc).strip()
+            log_path = _write_build_log(path.name, self.name, options, log)
             raise KernelBuildError(
-                f"{path.name}: OpenCL build failed on {self.name} with options "
-                f"{' '.join(options[1:])}\n{log}") from None
+                f"{path.name}: OpenCL build failed on {self.name} (build log: {log_path})\n"
+                f"options: {' '.join(options[1:])}\n{log}") from None
         self._programs[key] = prg
         return prg
 

@@ -42,3 +42,19 @@ def stoker(x, t: float, x0: float, h0: float, hr: float, g: float = 9.81):
     u = np.where(xi <= -c0, 0.0, np.where(xi <= 2 * c0 - 3 * cm, 2 / 3 * (xi + c0),
                                           np.where(xi <= s, um, 0.0)))
     return h, u
+
+
+def bernoulli_depth(z, energy: float, q: float, g: float = 9.81):
+    """Subcritical depth h(z) of steady 1D flow with discharge q (m^2/s) and head ``energy``
+    (m): the root above the critical depth (q^2/g)^(1/3) of h + q^2/(2 g h^2) + z = energy
+    (Zhou 2004's flow over a bump; SWASHES), by bisection in float64."""
+    z = np.asarray(z, np.float64)
+    lo = np.full(z.shape, (q * q / g) ** (1.0 / 3.0))
+    hi = energy - z
+    assert np.all(hi > lo), "the head is below critical: no subcritical solution"
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        above = mid + q * q / (2 * g * mid * mid) + z > energy
+        hi = np.where(above, mid, hi)
+        lo = np.where(above, lo, mid)
+    return 0.5 * (lo + hi)

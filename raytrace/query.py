@@ -18,6 +18,9 @@ from raytrace.scene import Scene
 
 def pack_rays(origins, directions, tmin=0.0, tmax=np.inf) -> tuple[np.ndarray, np.ndarray]:
     """(n,4) float32 origin|tmin and direction|tmax arrays, validated; one-line ValueErrors."""
+    for name, a in (("origins", origins), ("directions", directions)):
+        if np.iscomplexobj(a):
+            raise TypeError(f"{name} must be real numbers, got {np.asarray(a).dtype}")
     o = np.asarray(origins, dtype=np.float64)
     d = np.asarray(directions, dtype=np.float64)
     if o.ndim != 2 or o.shape[1] != 3:
@@ -35,8 +38,14 @@ def pack_rays(origins, directions, tmin=0.0, tmax=np.inf) -> tuple[np.ndarray, n
         raise ValueError(f"direction {int(np.flatnonzero(~(d != 0).any(axis=1))[0])} is zero")
     ro = np.empty((n, 4), np.float32)
     rd = np.empty((n, 4), np.float32)
-    ro[:, :3], ro[:, 3] = o, lo
-    rd[:, :3], rd[:, 3] = d, hi
+    with np.errstate(over="ignore", under="ignore"):
+        ro[:, :3], ro[:, 3] = o, lo
+        rd[:, :3], rd[:, 3] = d, hi
+    if not (np.isfinite(ro[:, :3]).all() and np.isfinite(rd[:, :3]).all()):
+        raise ValueError("origins and directions must be finite in float32 (|x| < 3.4e38)")
+    if (~(rd[:, :3] != 0).any(axis=1)).any():   # a tiny direction that float32 rounds to 0
+        raise ValueError(f"direction {int(np.flatnonzero(~(rd[:, :3] != 0).any(axis=1))[0])} "
+                         "is zero in float32")
     return ro, rd
 
 

@@ -214,20 +214,19 @@ class RenderScene:
         rec = np.zeros(1, INSTANCEINFO)
         rec["mesh"], rec["material"] = mesh_id, material
         self.instances = np.concatenate([self.instances, rec])
-        self._set_rows(inst, np.eye(4) if world_from_object is None else world_from_object)
+        self._dirty.add("instances")
         return inst
 
     def set_transform(self, instance_id: int, world_from_object) -> None:
+        """Move an instance (:meth:`raytrace.scene.Scene.set_transform`: one row of the scene's
+        transform buffer, which the shader reads too; normals follow on the device)."""
         self.scene.set_transform(instance_id, world_from_object)
-        self._set_rows(instance_id, world_from_object)
 
-    def _set_rows(self, inst: int, m) -> None:
-        a = np.asarray(m, np.float64)[:3]
-        rec = self.instances[inst]
-        rec["world_from_object"] = a
-        rec["normal_from_object"][:, :3] = np.linalg.inv(a[:, :3]).T
-        rec["normal_from_object"][:, 3] = 0.0
-        self._dirty.add("instances")
+    @property
+    def transform_buffer(self) -> cl.Buffer:
+        """The scene's device transform rows (``raytrace.scene.TRANSFORM_DTYPE``, one per
+        instance at ``scene.transform_row(i)``), read by the TLAS build and the shader."""
+        return self.scene.transform_buffer
 
     def add_light(self, kind: LightKind | str, *, direction=(0, -1, 0), color=(1, 1, 1),
                   position=(0, 0, 0), inner_angle: float = 20.0, outer_angle: float = 30.0
@@ -371,8 +370,10 @@ class RenderScene:
 
     def shade_bindings(self) -> dict:
         """``RENDER_GEOM_PARAMS`` (kernels/render_surface.h) by name, for ``Kernel.bind``."""
-        return {"g_inst": self.instance_buf, "g_mesh": self.mesh_info, "g_pos": self.positions,
-                "g_nrm": self.normals, "g_uv": self.uvs, "g_tri": self.triangles,
+        return {"g_inst": self.instance_buf, "g_xform": self.scene.transform_buffer,
+                "g_nxform": self.scene.normal_buffer, "g_mesh": self.mesh_info,
+                "g_pos": self.positions, "g_nrm": self.normals, "g_uv": self.uvs,
+                "g_tri": self.triangles,
                 "g_tri_mat": self.tri_materials, "g_mat": self.material_buf,
                 "g_tex": self.texinfo_buf, "g_texels": self.texel_buf}
 
@@ -391,7 +392,12 @@ class RenderScene:
                 d["normals"] = self.rt.to_host(m["nbuf"], np.float32,
                                                4 * m["n_vertices"]).reshape(-1, 4)[:, :3]
             meshes.append(d)
-        return {"meshes": meshes, "instances": self.instances.copy(),
+        # the reference's instance table: mesh, material and world_from_object (as on the device)
+        inst = np.zeros(len(self.instances), [("mesh", np.uint32), ("material", np.int32),
+                                              ("world_from_object", np.float32, (3, 4))])
+        inst["mesh"], inst["material"] = self.instances["mesh"], self.instances["material"]
+        inst["world_from_object"] = self.scene.read_transforms()
+        return {"meshes": meshes, "instances": inst,
                 "materials": np.array([m.record() for m in self.materials], MATERIAL),
                 "textures": list(self.textures)}
 

@@ -90,9 +90,7 @@ TEXINFO = np.dtype([("offset", np.uint32), ("width", np.uint32), ("height", np.u
 MESHINFO = np.dtype([("vert_offset", np.uint32), ("tri_offset", np.uint32),
                      ("material", np.int32), ("flags", np.uint32)])
 
-INSTANCEINFO = np.dtype([("world_from_object", np.float32, (3, 4)),
-                         ("normal_from_object", np.float32, (3, 4)),
-                         ("mesh", np.uint32), ("material", np.int32),
+INSTANCEINFO = np.dtype([("mesh", np.uint32), ("material", np.int32),
                          ("pad0", np.uint32), ("pad1", np.uint32)])
 
 RENDERPARAMS = np.dtype([("ambient", f4), ("sky_zenith", f4), ("sky_horizon", f4),

@@ -31,6 +31,10 @@ from raytrace.bvh import (
 from raytrace.bvh_wide import DEFAULT_WIDE_LEAF_SIZE, WideStorage
 from raytrace.sort import make_sorter
 
+#: One row of the scene's transform buffer (kernels/transform.h, 48 bytes): an instance's
+#: world_from_object as three float4 rows (xyz: the 3x3 part, w: the translation).
+TRANSFORM_DTYPE = np.dtype([("r0", np.float32, 4), ("r1", np.float32, 4),
+                            ("r2", np.float32, 4)])
 TLAS_LEAF_SIZE = 1
 TRACE_STATS_LEN = 4
 TRACE_STAT_OVERFLOW = 0
@@ -86,6 +90,12 @@ class Scene:
         ...                            # each frame:
         scene.set_transform(b, M); scene.update()   # refit water, rebuild the TLAS
         kernel.bind(**scene.trace_bindings(), ...)
+
+    Instance transforms live once, on the device, in :attr:`transform_buffer` (one
+    ``Transform`` row per instance, :meth:`transform_row`): the host writes a row when
+    :meth:`set_transform` changes it; a device stage may write rows itself (floating bodies),
+    with no host copy. Every :meth:`update` derives the Instance records, the world boxes and
+    the normal transforms (:attr:`normal_buffer`) from the rows on the device.
     """
 
     def __init__(self, rt: Runtime, *, leaf_size: int | None = None, layout: str | None = None,
@@ -96,10 +106,11 @@ class Scene:
         self.rt, self.leaf_size, self.stage = rt, int(leaf_size), stage
         self.meshes: list[MeshRecord] = []
         self._inst_mesh: list[int] = []
-        self._xforms = np.zeros((0, 3, 4), np.float32)
+        self._xforms = np.zeros((0, 3, 4), np.float32)  # the rows the host last wrote
+        self.transform_buffer = rt.buffer(TRANSFORM_DTYPE.itemsize)
+        self._xform_capacity = 0
         self._storage_tris = -1        # triangle count the shared storage was made for
         self._tlas_n = -1              # instance count the TLAS scratch was made for
-        self._xforms_dirty = True
         self.trace_stats = rt.buffer(4 * TRACE_STATS_LEN)
         cl.enqueue_fill_buffer(rt.queue, self.trace_stats, np.int32(0), 0, 4 * TRACE_STATS_LEN)
         self.tlas_info = rt.buffer(INFO_DTYPE.itemsize)
@@ -138,22 +149,67 @@ class Scene:
         return len(self.meshes) - 1
 
     def add_instance(self, mesh_id: int, world_from_object=None) -> int:
-        """Place mesh ``mesh_id`` with an affine 4x4 ``world_from_object`` (identity if None)."""
+        """Place mesh ``mesh_id`` with an affine 4x4 ``world_from_object`` (identity if None).
+
+        Its row of :attr:`transform_buffer` is written now. Adding instances beyond the
+        buffer's capacity moves it to a larger buffer (rows copied on the device): a device
+        writer takes :attr:`transform_buffer` again after adding instances."""
         self._check_mesh_id(mesh_id)
         rows = _affine_rows(np.eye(4) if world_from_object is None else world_from_object,
                             f"instance {len(self._inst_mesh)}")
+        inst = len(self._inst_mesh)
         self._inst_mesh.append(int(mesh_id))
         self._xforms = np.concatenate([self._xforms, rows[None]])
-        self._xforms_dirty = True
-        return len(self._inst_mesh) - 1
+        if inst >= self._xform_capacity:
+            self._grow_transforms(max(4, 2 * self._xform_capacity))
+        self._write_row(inst, rows)
+        return inst
 
     def set_transform(self, instance_id: int, world_from_object) -> None:
-        """Move an instance; takes effect at the next :meth:`update`."""
-        if not 0 <= int(instance_id) < len(self._inst_mesh):
+        """Move an instance: validates ``world_from_object`` (affine, finite, not singular) and
+        writes its row of :attr:`transform_buffer` (48 bytes, no wait) when it differs from
+        the last one the host wrote; takes effect at the next :meth:`update`. (A row a device
+        stage wrote since is overwritten only when the host's new value differs from its own
+        last one.)"""
+        i = int(instance_id)
+        if not 0 <= i < len(self._inst_mesh):
             raise ValueError(f"instance id {instance_id} out of range [0, {len(self._inst_mesh)})")
-        self._xforms[int(instance_id)] = _affine_rows(world_from_object,
-                                                      f"instance {instance_id}")
-        self._xforms_dirty = True
+        rows = _affine_rows(world_from_object, f"instance {instance_id}")
+        if np.array_equal(rows, self._xforms[i]):
+            return
+        self._xforms[i] = rows
+        self._write_row(i, rows)
+
+    def transform_row(self, instance_id: int) -> int:
+        """The row of :attr:`transform_buffer` holding instance ``instance_id``'s
+        world_from_object (a device stage writes ``Transform`` records there)."""
+        i = int(instance_id)
+        if not 0 <= i < len(self._inst_mesh):
+            raise ValueError(f"instance id {instance_id} out of range [0, {len(self._inst_mesh)})")
+        return i
+
+    def _grow_transforms(self, capacity: int) -> None:
+        rt = self.rt
+        new = rt.buffer(TRANSFORM_DTYPE.itemsize * capacity)
+        if self._xform_capacity:  # keep rows a device stage may have written
+            rt.record(f"{self.stage}.transform", cl.enqueue_copy(
+                rt.queue, new, self.transform_buffer,
+                byte_count=TRANSFORM_DTYPE.itemsize * self._xform_capacity))
+        self.transform_buffer, self._xform_capacity = new, capacity
+        self._tlas_n = -1  # tlas_prep reads the new buffer
+
+    def _write_row(self, i: int, rows: np.ndarray) -> None:
+        # non-blocking: pyopencl keeps the host array alive until the copy is done
+        rt = self.rt
+        rt.record(f"{self.stage}.transform", cl.enqueue_copy(
+            rt.queue, self.transform_buffer, np.ascontiguousarray(rows, np.float32),
+            dst_offset=TRANSFORM_DTYPE.itemsize * i, is_blocking=False))
+
+    def read_transforms(self) -> np.ndarray:
+        """(n_instances, 3, 4) float32 world_from_object rows as on the device (synchronises;
+        tests and references)."""
+        n = self.n_instances
+        return self.rt.to_host(self.transform_buffer, np.float32, 12 * n).reshape(n, 3, 4)
 
     @property
     def wide(self) -> bool:
@@ -239,6 +295,7 @@ class Scene:
         self.tlas_nodes = rt.buffer(NODE_DTYPE.itemsize)
         self.tlas_prims = rt.buffer(4)
         self.instances = rt.buffer(INSTANCE_DTYPE.itemsize)
+        self.normal_buffer = rt.buffer(TRANSFORM_DTYPE.itemsize)
         if not hasattr(self, "blas_nodes"):
             self.blas_nodes = rt.buffer(NODE_DTYPE.itemsize)
             self.blas_tris = rt.buffer(TRI_DTYPE.itemsize)
@@ -252,8 +309,8 @@ class Scene:
         self._tlas_flags = rt.buffer(4 * node_count(n))
         cl.enqueue_fill_buffer(rt.queue, self._tlas_flags, np.int32(-1), 0, 4 * node_count(n))
         self.instances = rt.buffer(INSTANCE_DTYPE.itemsize * n)
+        self.normal_buffer = rt.buffer(TRANSFORM_DTYPE.itemsize * n)
         self._tlas_boxes = rt.buffer(32 * n)
-        self._xforms_dev = rt.buffer(48 * n)
         self._inst_mesh_dev = rt.to_device(np.array(self._inst_mesh, np.int32))
         st = f"{self.stage}.tlas"
 
@@ -261,10 +318,11 @@ class Scene:
             return rt.kernel_launcher("bvh_tlas.cl", name, stage=f"{st}.{stage}")
 
         self._prep = kernel("tlas_prep", "prep").bind(
-            n_inst=n, xforms=self._xforms_dev, inst_mesh=self._inst_mesh_dev,
+            n_inst=n, xforms=self.transform_buffer, inst_mesh=self._inst_mesh_dev,
             mesh_prim_base=self.mesh_prim_base, blas_infos=self.blas_infos,
             mesh_wide_root=self.mesh_wide_root, wide=int(self.wide), instances=self.instances,
-            boxes=self._tlas_boxes, tlas_info=self.tlas_info).set_size(n, BOUNDS_WG)
+            normals=self.normal_buffer, boxes=self._tlas_boxes, tlas_info=self.tlas_info)
+        self._prep.set_size(n, BOUNDS_WG)
         self._morton = kernel("bvh_box_morton", "morton").bind(
             n=n, boxes=self._tlas_boxes, info=self.tlas_info, key_bits=32,
             keys=self._tlas_keys, vals=self.tlas_prims).set_size(n, 64)
@@ -275,22 +333,15 @@ class Scene:
         self._tlas_sorter = make_sorter(rt, self._tlas_keys, self.tlas_prims, n,
                                         stage=f"{st}.sort")
         self._tlas_n = n
-        self._xforms_dirty = True
 
     def _build_tlas(self) -> None:
-        rt, n, st = self.rt, self.n_instances, f"{self.stage}.tlas"
+        n = self.n_instances
         self._reset.bind(n_prims=n)
         self._reset()  # root = -1: an empty scene misses
         if n == 0:
             return
         if n != self._tlas_n:
             self._allocate_tlas(n)
-        if self._xforms_dirty:
-            # non-blocking: pyopencl keeps the host array alive until the copy is done
-            evt = cl.enqueue_copy(rt.queue, self._xforms_dev, self._xforms.copy(),
-                                  is_blocking=False)
-            rt.record(f"{st}.upload", evt)
-            self._xforms_dirty = False
         self._prep()
         self._morton()
         self._tlas_sorter.enqueue()

@@ -1,0 +1,120 @@
+"""Window display-path benchmark, with no display: a headless EGL context
+(moderngl.create_standalone_context(backend="egl")) stands in for the window's.
+
+Per image size: the bare frame (World.frame: water, BVH, render, RGBA8 read-back; what
+`bench frame` times), the window's loop (two frames in flight: enqueue the next, read the oldest,
+upload it to a texture through a pixel buffer, draw the quad into a framebuffer of that size,
+glFinish), and the upload + draw alone. The goal (issue 11): the window's loop <= 1.1x the bare
+frame. Every size is checked in the same run: the drawn framebuffer must equal the frame's image
+exactly, else the run fails.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--scene", default=str(SCENES_DIR / "pool.toml"), help="scene TOML file")
+    p.add_argument("--sizes", nargs="+", default=["1280x720", "1920x1080"],
+                   help="image sizes WxH")
+    p.add_argument("--cells", type=int, help="water cells along the pool's longer side "
+                                             "(default: the scene's)")
+    p.add_argument("--frames", type=int, default=30, help="timed frames (median)")
+    p.add_argument("--warmup", type=int, default=5, help="untimed frames first")
+    p.add_argument("--frame-time", type=float, default=1 / 60,
+                   help="simulated seconds of water per frame")
+    p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
+                   help="texture upload path")
+
+
+def _egl_context():
+    import moderngl
+
+    from app.errors import LbwaterError
+
+    try:
+        return moderngl.create_standalone_context(backend="egl")
+    except Exception as exc:
+        raise LbwaterError(f"bench window: no EGL context ({str(exc).splitlines()[0]}); "
+                           "install the GPU driver's or Mesa's libEGL") from None
+
+
+def _median_ms(xs) -> float:
+    return statistics.median(xs) * 1e3
+
+
+def run(args) -> int:
+    from app.io import write_csv, write_json
+    from app.scene import load_scene
+    from app.window import Presenter, display_path, make_world, parse_size
+    from kernels import get_runtime
+
+    sizes = [parse_size(s, "--sizes") for s in args.sizes]
+    scene = load_scene(args.scene)
+    rt = get_runtime(args.device)
+    ctx = _egl_context()
+    presenter = Presenter(ctx, args.upload)
+    rows = []
+    ft = args.frame_time
+    for w, h in sizes:
+        world = make_world(scene, rt, size=(w, h), spp=scene.render.spp,
+                           bounces=scene.render.bounces, cells=args.cells)
+        fbo = ctx.simple_framebuffer((w, h), components=4)
+        fbo.use()
+        for _ in range(args.warmup):
+            world.frame(ft)
+        bare = []
+        for _ in range(args.frames):
+            t0 = time.perf_counter()
+            world.frame(ft)
+            bare.append(time.perf_counter() - t0)
+        # the window's loop: two frames in flight
+        world.enqueue_frame(ft)
+        loop, upload = [], []
+        for k in range(args.warmup + args.frames):
+            t0 = time.perf_counter()
+            world.enqueue_frame(ft)
+            _, img = world.read_frame()
+            t1 = time.perf_counter()
+            presenter.upload(img)
+            presenter.draw((w, h))
+            ctx.finish()
+            t2 = time.perf_counter()
+            if k >= args.warmup:
+                loop.append(t2 - t0)
+                upload.append(t2 - t1)
+        _, img = world.read_frame()
+        presenter.upload(img)
+        shown = presenter.snapshot((w, h))
+        fbo.use()
+        if not np.array_equal(shown, img):
+            bad = np.mean(np.any(shown != img, axis=2))
+            raise RuntimeError(f"bench window: {w}x{h}: the drawn frame differs from the image "
+                               f"on {bad:.1%} of pixels")
+        bare_ms, loop_ms = _median_ms(bare), _median_ms(loop)
+        cells = getattr(world.stats, "water_cells", None)
+        row = {"device": world.device_name, "gl_renderer": ctx.info["GL_RENDERER"],
+               "date": time.strftime("%Y-%m-%d"), "width": w, "height": h,
+               "cells": f"{cells[0]}x{cells[1]}" if cells else "",
+               "upload": args.upload, "display_path": display_path(rt),
+               "bare_frame_ms": round(bare_ms, 3), "window_frame_ms": round(loop_ms, 3),
+               "ratio": round(loop_ms / bare_ms, 3),
+               "upload_draw_ms": round(_median_ms(upload), 3),
+               "window_fps": round(1e3 / loop_ms, 1)}
+        rows.append(row)
+        print(f"{w}x{h}: bare frame {bare_ms:.2f} ms, window loop {loop_ms:.2f} ms "
+              f"({row['ratio']:.2f}x), upload+draw {row['upload_draw_ms']:.2f} ms "
+              f"[{row['gl_renderer']}]", flush=True)
+        fbo.release()
+        world.close()
+    out = Path(args.out)
+    write_json(out / "bench_window.json", rows)
+    write_csv(out / "bench_window.csv", rows)
+    return 0

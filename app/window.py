@@ -1,0 +1,759 @@
+"""Open an interactive window on a scene: rain, mouse ripples, an orbit camera and a HUD.
+
+Display path: each frame's RGBA8 image is read back without blocking (two frames in flight,
+World.enqueue_frame / read_frame) and uploaded to a GL texture through a pixel buffer, then drawn
+as one quad with the HUD over it. Where the OpenCL device offers cl_khr_gl_sharing the window says
+so, but rendering straight into the GL texture is not implemented (PoCL and pip's pyopencl lack
+the extension, so it could not be tested here): the copy path is always used, and the HUD names it.
+
+Mouse: drag on the water makes ripples where the mouse ray meets the water; Shift+drag pushes the
+water along the drag; drag elsewhere orbits; right drag pans; the wheel zooms. Keys: R rain,
+[ ] rain rate, Space pause, N one step, B boat, + - bounces, 1 2 4 samples, G / Shift+G grid,
+S screenshot, C caustics, H help, F2 HUD, F fullscreen, Esc quit.
+
+Quality: --quality auto (default) measures a few frames at start and picks the water grid,
+render scale and bounce depth that hold --target-fps; --quality low|medium|high fixes them;
+--cells, --scale and --bounces pin their own part. Scripting: --frames N, --screenshot PATH,
+--record-events FILE and --events FILE (a deterministic replay: events at their frame indices,
+recorded frame times). Without a display it says so and exits with status 2: use `lbwater capture`.
+
+    lbwater window scenes/pool.toml --size 1280x720
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from app.controls import (
+    HELP,
+    Action,
+    Button,
+    Controls,
+    OrbitCamera,
+    Water,
+)
+from app.errors import InputError, LbwaterError
+
+SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+EVENTS_VERSION = 1
+
+
+class NoDisplayError(LbwaterError):
+    """No display to open a window on (the CLI prints one line, exit status 2)."""
+
+
+# ---- arguments ----------------------------------------------------------------------------------
+def parse_size(text: str, what: str = "--size") -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise InputError(f"{what} {text!r} must look like WIDTHxHEIGHT, e.g. 1280x720") from None
+    if not (16 <= w <= 16384 and 16 <= h <= 16384):
+        raise InputError(f"{what} {text!r}: width and height must lie in [16, 16384]")
+    return w, h
+
+
+def add_arguments(p) -> None:
+    from app.quality import QUALITIES
+
+    p.add_argument("scene", nargs="?", default=str(SCENES_DIR / "pool.toml"),
+                   help="scene TOML file (default scenes/pool.toml)")
+    p.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
+    p.add_argument("--size", help="window size WxH in pixels (default: the scene's [render])")
+    p.add_argument("--quality", choices=QUALITIES, default="auto",
+                   help="auto: measure and pick grid, scale and bounces for --target-fps; "
+                        "low/medium/high: fixed presets")
+    p.add_argument("--target-fps", type=float, default=60.0, help="frame rate auto aims for")
+    p.add_argument("--cells", type=int, help="water cells along the pool's longer side")
+    p.add_argument("--scale", type=float, help="image pixels per window pixel, (0, 1]")
+    p.add_argument("--bounces", type=int, help="reflection/refraction depth")
+    p.add_argument("--spp", type=int, choices=(1, 2, 4), help="samples per pixel")
+    p.add_argument("--no-vsync", action="store_true", help="do not wait for the display refresh")
+    p.add_argument("--frames", type=int, help="exit after this many frames")
+    p.add_argument("--screenshot", help="write the last frame to this PNG on exit")
+    p.add_argument("--screenshot-hud", action="store_true",
+                   help="the --screenshot includes the HUD and overlays")
+    p.add_argument("--events", help="replay input events from this JSON-lines file")
+    p.add_argument("--record-events", help="write the input events to this JSON-lines file")
+    p.add_argument("--frame-time", type=float,
+                   help="simulated seconds per frame (default: the measured frame interval)")
+    p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
+                   help="texture upload: through a pixel buffer (default) or directly")
+
+
+def check_args(args) -> None:
+    if args.target_fps is not None and not 1 <= args.target_fps <= 1000:
+        raise InputError(f"--target-fps {args.target_fps} must lie in [1, 1000]")
+    if args.scale is not None and not 0.05 <= args.scale <= 1.0:
+        raise InputError(f"--scale {args.scale} must lie in [0.05, 1]")
+    if args.cells is not None and not 4 <= args.cells <= 16384:
+        raise InputError(f"--cells {args.cells} must lie in [4, 16384]")
+    if args.bounces is not None and not 0 <= args.bounces <= 8:
+        raise InputError(f"--bounces {args.bounces} must lie in [0, 8]")
+    if args.frames is not None and args.frames < 1:
+        raise InputError(f"--frames {args.frames} must be >= 1")
+    if args.frame_time is not None and not 0 < args.frame_time <= 1:
+        raise InputError(f"--frame-time {args.frame_time} must lie in (0, 1] s")
+    if args.screenshot is not None and Path(args.screenshot).suffix.lower() != ".png":
+        raise InputError(f"--screenshot {args.screenshot!r} must end in .png")
+
+
+def require_display() -> None:
+    """Raise :class:`NoDisplayError` (one line) where no window can be opened."""
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        raise NoDisplayError("no display (DISPLAY is not set): the window needs one; render "
+                             "without a display with `lbwater capture SCENE`")
+
+
+# ---- worlds -------------------------------------------------------------------------------------
+def make_world(scene, device, *, size, spp, bounces, cells):
+    """The World the window drives (docs/frame_api.md), ``cells`` along the pool's longer side."""
+    from app.world import World
+
+    return World(scene, device, width=size[0], height=size[1], spp=spp, bounces=bounces,
+                 cells=None if scene.water is None else cells)
+
+
+def display_path(rt) -> str:
+    """Which display path is used and why, for the HUD and the start line."""
+    exts = rt.device.extensions.split()
+    if "cl_khr_gl_sharing" in exts:
+        return ("copy (2 in flight, pixel-buffer upload); cl_khr_gl_sharing present but the "
+                "shared path is not implemented")
+    return "copy (2 in flight, pixel-buffer upload); no cl_khr_gl_sharing on this device"
+
+
+def water_of(scene, cells: int | None) -> Water | None:
+    """The water as the World lays it out with ``cells`` along its longer side."""
+    from app.assemble import water_spec
+
+    w = water_spec(scene, cells)
+    if w is None:
+        return None
+    return Water(tuple(w.origin), tuple(w.size), float(w.depth), float(w.size[0]) / w.cells[0])
+
+
+def decide_quality(args, scene, rt, window_size, frame_seconds):
+    """The quality for this run (``--quality``, overrides, or a short measurement)."""
+    from app import quality as q
+
+    water = scene.water
+    max_cells = max(water.cells) if water is not None else 2
+    max_bounces = args.bounces if args.bounces is not None else scene.render.bounces
+    if args.quality != "auto":
+        base = q.preset(args.quality, max_cells=max_cells, max_bounces=max(max_bounces, 1))
+        return dataclasses.replace(
+            base, cells=args.cells or base.cells, scale=args.scale or base.scale,
+            bounces=base.bounces if args.bounces is None else args.bounces)
+    if water is None:
+        return q.Quality(2, args.scale or 1.0, max_bounces, "auto (no water)")
+    if args.cells and args.scale and args.bounces is not None:
+        return q.Quality(args.cells, args.scale, args.bounces, "fixed")
+    probe_cells = args.cells or min(max_cells, 64)
+    probe_size = q.scaled_size(window_size, min(0.5, args.scale or 0.5))
+    probe_bounces = min(2, max_bounces) if args.bounces is None else args.bounces
+    world = make_world(scene, rt, size=probe_size, spp=args.spp or 1, bounces=probe_bounces,
+                       cells=probe_cells)
+    stats, wall_ms = q.measure(world, frame_seconds)
+    world.close()
+    nx, ny = stats[-1].water_cells
+    steps = sum(s.lbm_steps for s in stats) / len(stats)
+    costs = q.costs_from_stats(stats, wall_ms, n_cells=nx * ny, steps=steps)
+    return q.choose(costs, target_fps=args.target_fps, window=window_size, max_cells=max_cells,
+                    max_bounces=max(max_bounces, 1), aspect=q.aspect_of(water.size),
+                    spp=args.spp or 1, base_cells=probe_cells, fixed_cells=args.cells,
+                    fixed_scale=args.scale, fixed_bounces=args.bounces)
+
+
+# ---- event files ---------------------------------------------------------------------------
+class EventLog:
+    """Input events as JSON lines: a header, then ``{"frame": i, "t": s, "kind": ...}`` records
+    (kinds: button, cursor, scroll, action, resize, tick). ``frame`` is the index of the frame
+    the event reaches; a ``tick`` holds that frame's simulated seconds."""
+
+    KINDS = {"button": ("button", "pressed", "shift"), "cursor": ("x", "y"), "scroll": ("dy",),
+             "action": ("action",), "resize": ("width", "height"), "tick": ("seconds",)}
+
+    def __init__(self, header: dict, events: list[dict]):
+        self.header = header
+        self.events = events
+        self.by_frame: dict[int, list[dict]] = {}
+        for e in events:
+            self.by_frame.setdefault(e["frame"], []).append(e)
+
+    @classmethod
+    def load(cls, path) -> EventLog:
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise InputError(f"--events {path}: cannot read ({exc.strerror})") from None
+        header, events = None, []
+        for n, line in enumerate(text.splitlines(), 1):
+            if not line.strip():
+                continue
+            try:
+                rec = json.loads(line)
+            except json.JSONDecodeError as exc:
+                raise InputError(f"{path}:{n}: not JSON ({exc.msg})") from None
+            if not isinstance(rec, dict):
+                raise InputError(f"{path}:{n}: each line must be a JSON object")
+            if header is None:
+                if rec.get("kind") != "header" or rec.get("version") != EVENTS_VERSION:
+                    raise InputError(f"{path}:{n}: the first line must be the header "
+                                     f"{{\"kind\": \"header\", \"version\": {EVENTS_VERSION}}}")
+                header = rec
+                continue
+            kind = rec.get("kind")
+            if kind not in cls.KINDS:
+                raise InputError(f"{path}:{n}: kind={kind!r}; allowed: {', '.join(cls.KINDS)}")
+            missing = [k for k in ("frame", *cls.KINDS[kind]) if k not in rec]
+            if missing:
+                raise InputError(f"{path}:{n}: {kind} event lacks {', '.join(missing)}")
+            if not isinstance(rec["frame"], int) or rec["frame"] < 0:
+                raise InputError(f"{path}:{n}: frame={rec['frame']!r} must be an integer >= 0")
+            if kind == "action":
+                try:
+                    Action.from_str(rec["action"])
+                except ValueError as exc:
+                    raise InputError(f"{path}:{n}: {exc}") from None
+            if kind == "button" and str(rec["button"]).upper() not in Button.__members__:
+                raise InputError(f"{path}:{n}: button={rec['button']!r}; allowed: left, right, "
+                                 "middle")
+            events.append(rec)
+        if header is None:
+            raise InputError(f"{path}: empty event file (no header)")
+        return cls(header, events)
+
+    def write(self, path) -> None:
+        from app.io import atomic_path
+
+        with atomic_path(path) as tmp:
+            with open(tmp, "w") as fh:
+                fh.write(json.dumps({"kind": "header", "version": EVENTS_VERSION,
+                                     **self.header}) + "\n")
+                for e in self.events:
+                    fh.write(json.dumps(e) + "\n")
+
+
+# ---- GL: the image on screen ----------------------------------------------------------------
+_QUAD_VS = """
+#version 330
+in vec2 pos;
+out vec2 uv;
+void main() {
+    uv = vec2(0.5 * pos.x + 0.5, 0.5 - 0.5 * pos.y);   // image row 0 at the top
+    gl_Position = vec4(pos, 0.0, 1.0);
+}
+"""
+_QUAD_FS = """
+#version 330
+uniform sampler2D image;
+in vec2 uv;
+out vec4 frag;
+void main() { frag = vec4(texture(image, uv).rgb, 1.0); }
+"""
+
+
+class Presenter:
+    """Uploads RGBA8 frames into a texture (through a pixel buffer or directly) and draws them
+    over the current framebuffer's viewport. Works in any moderngl context (window or EGL)."""
+
+    def __init__(self, ctx, upload: str = "pbo"):
+        if upload not in ("pbo", "direct"):
+            raise ValueError(f"upload={upload!r}; allowed: pbo, direct")
+        self.ctx, self.upload_mode = ctx, upload
+        self.prog = ctx.program(vertex_shader=_QUAD_VS, fragment_shader=_QUAD_FS)
+        quad = np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32)
+        self.vbo = ctx.buffer(quad.tobytes())
+        self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f", "pos")])
+        self.texture = None
+        self.pbo = None
+        self.size = None
+
+    def upload(self, img: np.ndarray) -> None:
+        h, w = img.shape[:2]
+        if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 4:
+            raise ValueError(f"Presenter.upload: need (H, W, 4) uint8, got {img.shape} "
+                             f"{img.dtype}")
+        if self.size != (w, h):
+            if self.texture is not None:
+                self.texture.release()
+            if self.pbo is not None:
+                self.pbo.release()
+            self.texture = self.ctx.texture((w, h), 4)
+            self.pbo = self.ctx.buffer(reserve=w * h * 4, dynamic=True)
+            self.size = (w, h)
+        data = np.ascontiguousarray(img)
+        if self.upload_mode == "pbo":
+            self.pbo.orphan()
+            self.pbo.write(data)
+            self.texture.write(self.pbo)
+        else:
+            self.texture.write(data)
+
+    def draw(self, viewport_size) -> None:
+        """Draw the last uploaded image over (0, 0, w, h) of the bound framebuffer."""
+        if self.texture is None:
+            return
+        exact = tuple(viewport_size) == self.size
+        f = self.ctx.NEAREST if exact else self.ctx.LINEAR
+        self.texture.filter = (f, f)
+        self.ctx.viewport = (0, 0, *viewport_size)
+        self.texture.use(0)
+        self.vao.render(self.ctx.TRIANGLE_STRIP)
+
+    def snapshot(self, size) -> np.ndarray:
+        """The last image drawn as it appears on a ``size`` framebuffer, HUD excluded:
+        (H, W, 4) uint8, row 0 on top."""
+        prev = self.ctx.fbo
+        fbo = self.ctx.simple_framebuffer(tuple(size), components=4)
+        try:
+            fbo.use()
+            fbo.clear(0, 0, 0, 1)
+            self.draw(size)
+            data = fbo.read(components=4, alignment=1)
+        finally:
+            fbo.release()
+            if prev is not None:
+                prev.use()
+            else:   # a standalone context without a default framebuffer
+                self.ctx.fbo = None
+        return np.frombuffer(data, np.uint8).reshape(size[1], size[0], 4)[::-1].copy()
+
+
+def write_png(path, img: np.ndarray) -> None:
+    import imageio.v3 as iio
+
+    from app.io import atomic_path
+
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, img, extension=".png")
+
+
+# ---- the window ---------------------------------------------------------------------------------
+#: glfw key name -> action (Shift variants handled in the callback).
+KEYMAP = {
+    "ESCAPE": Action.QUIT, "R": Action.TOGGLE_RAIN, "LEFT_BRACKET": Action.RAIN_LESS,
+    "RIGHT_BRACKET": Action.RAIN_MORE, "SPACE": Action.PAUSE, "N": Action.STEP,
+    "B": Action.DROP_BOAT, "EQUAL": Action.BOUNCES_UP, "KP_ADD": Action.BOUNCES_UP,
+    "MINUS": Action.BOUNCES_DOWN, "KP_SUBTRACT": Action.BOUNCES_DOWN, "1": Action.SPP_1,
+    "2": Action.SPP_2, "4": Action.SPP_4, "G": Action.GRID_UP, "S": Action.SCREENSHOT,
+    "C": Action.TOGGLE_CAUSTICS, "H": Action.TOGGLE_HELP, "F": Action.FULLSCREEN,
+    "F2": Action.TOGGLE_HUD,
+}
+
+
+def _open_window(glfw, size, title, visible):
+    """A GL 3.3 core window: an EGL context first on Linux (so a headless EGL context can live in
+    the same process, as in the tests and `bench window`; GLX and EGL contexts of one thread
+    clash under libglvnd), else the platform's native one."""
+    apis = [glfw.NATIVE_CONTEXT_API]
+    if sys.platform.startswith("linux"):
+        apis.insert(0, glfw.EGL_CONTEXT_API)
+    for api in apis:
+        glfw.default_window_hints()
+        for hint, value in ((glfw.CONTEXT_VERSION_MAJOR, 3), (glfw.CONTEXT_VERSION_MINOR, 3),
+                            (glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE),
+                            (glfw.OPENGL_FORWARD_COMPAT, True), (glfw.VISIBLE, visible),
+                            (glfw.CONTEXT_CREATION_API, api)):
+            glfw.window_hint(hint, value)
+        win = glfw.create_window(size[0], size[1], title, None, None)
+        if win:
+            return win
+    return None
+
+
+class _GlfwLoader:
+    """GL entry points for moderngl from glfw (whatever API made the window's context)."""
+
+    def __init__(self, glfw):
+        self.glfw = glfw
+
+    def load_opengl_function(self, name: str) -> int:
+        import ctypes
+
+        return ctypes.cast(self.glfw.get_proc_address(name), ctypes.c_void_p).value or 0
+
+    def release(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        pass
+
+
+class Viewer:
+    """The window: glfw callbacks -> :class:`Controls`; a frame loop with two frames in flight.
+
+    ``replay`` (an :class:`EventLog`) replaces live input; ``record`` collects it. Tests call
+    the ``on_*`` callbacks directly with synthesized events, as glfw would."""
+
+    def __init__(self, scene, rt, *, window_size, quality, spp=1, frame_time=None,
+                 vsync=True, upload="pbo", replay: EventLog | None = None, record=False,
+                 title="lbwater", visible=True):
+        import glfw
+        import moderngl
+
+        from app.quality import scaled_size
+
+        self.glfw = glfw
+        self.scene, self.rt, self.quality = scene, rt, quality
+        self.frame_time = frame_time
+        self.replay = replay
+        self.recording = [] if record else None
+        glfw.ERROR_REPORTING = "ignore"
+        if not glfw.init():
+            desc = glfw.get_error()[1] if hasattr(glfw, "get_error") else None
+            why = desc.decode() if isinstance(desc, bytes) else str(desc or "glfw.init failed")
+            raise NoDisplayError(f"no display ({why}); render without a display with "
+                                 "`lbwater capture SCENE`")
+        self.win = _open_window(glfw, window_size, title, visible)
+        if not self.win:
+            glfw.terminate()
+            raise NoDisplayError("could not open an OpenGL 3.3 window on this display; render "
+                                 "without a display with `lbwater capture SCENE`")
+        glfw.make_context_current(self.win)
+        glfw.swap_interval(1 if vsync else 0)
+        self.ctx = moderngl.create_context(context=_GlfwLoader(glfw))
+        self.presenter = Presenter(self.ctx, upload)
+        from app.hud import Hud
+        self.hud = Hud(self.ctx)
+        self.fb_size = tuple(glfw.get_framebuffer_size(self.win))
+        self._start_window = tuple(window_size)
+        self.win_size = tuple(glfw.get_window_size(self.win))
+        logical = tuple(replay.header.get("window", self.win_size)) if replay else self.win_size
+        c = scene.camera
+        bounces = quality.bounces
+        self.cells = quality.cells if scene.water is not None else None
+        image = scaled_size(logical, quality.scale)
+        self.controls = Controls(OrbitCamera.from_look(c.eye, c.target, c.fov),
+                                 water_of(scene, self.cells), spp=spp, bounces=bounces,
+                                 cells=self.cells, window_size=logical, image_size=image,
+                                 frame_time=frame_time or 1 / 60)
+        self.path = display_path(rt)
+        self.world = make_world(scene, rt, size=image, spp=spp, bounces=bounces,
+                                cells=self.cells)
+        self.controls.reapply(self.world, camera=False)
+        self.next_frame = 0       # index of the next frame to enqueue (event time base)
+        self.in_flight = 0
+        self.shown = 0
+        self.t0 = time.perf_counter()
+        self._t_last = None
+        self._dt_ema = None
+        self.fullscreen_saved = None
+        self.screenshots: list[Path] = []
+        self.last_snapshot = None
+        self._keys = {getattr(glfw, f"KEY_{name}"): a for name, a in KEYMAP.items()}
+        if replay is None:
+            glfw.set_mouse_button_callback(self.win, self._glfw_button)
+            glfw.set_cursor_pos_callback(self.win, self._glfw_cursor)
+            glfw.set_scroll_callback(self.win, self._glfw_scroll)
+            glfw.set_key_callback(self.win, self._glfw_key)
+        else:  # replay: only Esc from the keyboard
+            glfw.set_key_callback(self.win, self._glfw_key_replay)
+        glfw.set_framebuffer_size_callback(self.win, self._glfw_fb)
+
+    # -- time -------------------------------------------------------------------------------
+    def now(self) -> float:
+        return time.perf_counter() - self.t0
+
+    # -- recording + the callbacks a user triggers ------------------------------------------
+    def _rec(self, kind: str, **fields) -> None:
+        if self.recording is not None:
+            self.recording.append({"frame": self.next_frame, "t": round(self.now(), 4),
+                                   "kind": kind, **fields})
+
+    def on_button(self, button: Button, pressed: bool, shift: bool = False) -> None:
+        self._rec("button", button=Button(button).name.lower(), pressed=bool(pressed),
+                  shift=bool(shift))
+        self.controls.mouse_button(self.world, button, pressed, shift)
+
+    def on_cursor(self, x: float, y: float) -> None:
+        self._rec("cursor", x=float(x), y=float(y))
+        self.controls.cursor(self.world, x, y)
+
+    def on_scroll(self, dy: float) -> None:
+        self._rec("scroll", dy=float(dy))
+        self.controls.scroll(self.world, dy)
+
+    def on_action(self, action: Action) -> None:
+        self._rec("action", action=Action(action).name.lower())
+        self.controls.action(self.world, action, self.now())
+
+    def on_resize(self, width: int, height: int) -> None:
+        """The framebuffer is now width x height (window pixels = framebuffer pixels here)."""
+        self._rec("resize", width=int(width), height=int(height))
+        self.controls.resize(self.world, width, height)
+
+    def _replay(self, e: dict) -> None:
+        """One recorded event, through the same callbacks as live input (so a replay can be
+        recorded again)."""
+        k = e["kind"]
+        if k == "button":
+            self.on_button(Button[str(e["button"]).upper()], bool(e["pressed"]),
+                           bool(e["shift"]))
+        elif k == "cursor":
+            self.on_cursor(float(e["x"]), float(e["y"]))
+        elif k == "scroll":
+            self.on_scroll(float(e["dy"]))
+        elif k == "action":
+            self.on_action(Action.from_str(e["action"]))
+        elif k == "resize":
+            self.on_resize(int(e["width"]), int(e["height"]))
+
+    def _glfw_button(self, win, button, action, mods) -> None:
+        g = self.glfw
+        b = {g.MOUSE_BUTTON_LEFT: Button.LEFT, g.MOUSE_BUTTON_RIGHT: Button.RIGHT,
+             g.MOUSE_BUTTON_MIDDLE: Button.MIDDLE}.get(button)
+        if b is not None and action in (g.PRESS, g.RELEASE):
+            self.on_button(b, action == g.PRESS, bool(mods & g.MOD_SHIFT))
+
+    def _glfw_cursor(self, win, x, y) -> None:
+        self.on_cursor(x, y)
+
+    def _glfw_scroll(self, win, dx, dy) -> None:
+        self.on_scroll(dy)
+
+    def _glfw_key(self, win, key, scancode, action, mods) -> None:
+        g = self.glfw
+        if action != g.PRESS:
+            return
+        a = self._keys.get(key)
+        if a == Action.GRID_UP and mods & g.MOD_SHIFT:
+            a = Action.GRID_DOWN
+        if a is not None:
+            self.on_action(a)
+
+    def _glfw_key_replay(self, win, key, scancode, action, mods) -> None:
+        if action == self.glfw.PRESS and key == self.glfw.KEY_ESCAPE:
+            self.controls.action(self.world, Action.QUIT)
+
+    def _glfw_fb(self, win, width, height) -> None:
+        self.fb_size = (width, height)
+        self.win_size = tuple(self.glfw.get_window_size(self.win))
+        if self.replay is None and width > 0 and height > 0:
+            self.on_resize(*self.win_size)
+
+    # -- the loop ---------------------------------------------------------------------------
+    def _seconds(self) -> float:
+        """Simulated seconds for the next frame: the replayed tick, --frame-time, or the
+        smoothed measured frame interval (clamped to [1/240, 1/15] s)."""
+        if self.replay is not None:
+            ticks = [e for e in self.replay.by_frame.get(self.next_frame, ())
+                     if e["kind"] == "tick"]
+            if ticks:
+                return float(ticks[-1]["seconds"])
+        if self.frame_time is not None:
+            return self.frame_time
+        dt = self._dt_ema if self._dt_ema is not None else 1 / 60
+        return min(1 / 15, max(1 / 240, dt))
+
+    def _drain(self):
+        img = None
+        while self.in_flight:
+            _, img = self.world.read_frame()
+            self.in_flight -= 1
+        return img
+
+    def _rebuild(self, **changes) -> None:
+        """A new World at new settings (spp, bounces, cells, image size), same camera/scene.
+        The water restarts from the scene's initial state."""
+        from app.quality import scaled_size
+
+        img = self._drain()
+        if img is not None:
+            self.presenter.upload(img)
+        c = self.controls
+        self.cells = changes.get("cells", self.cells)
+        size = scaled_size(c.window_size, self.quality.scale)
+        self.world.close()
+        self.world = make_world(self.scene, self.rt, size=size, spp=c.spp, bounces=c.bounces,
+                                cells=self.cells)
+        c.image_size = tuple(self.world.size)
+        c.water = water_of(self.scene, self.cells)
+        c.reapply(self.world)
+
+    def step(self, limit: int | None = None) -> bool:
+        """One turn of the loop: input, hand it over, enqueue the next frame, show the oldest.
+        Returns False once the window should close."""
+        from app.quality import scaled_size
+
+        g = self.glfw
+        if self.replay is None:
+            g.poll_events()
+        else:
+            g.poll_events()   # keep the window responsive; input comes from the file
+            for e in self.replay.by_frame.get(self.next_frame, ()):
+                self._replay(e)
+        req = self.controls.apply(self.world)
+        if req.fullscreen:
+            self._toggle_fullscreen()
+        want = scaled_size(self.controls.window_size, self.quality.scale)
+        if req.rebuild or want != tuple(self.world.size):
+            self._rebuild(**req.rebuild)
+        more = limit is None or self.next_frame < limit
+        if more and not req.quit:
+            seconds = self.controls.frame_seconds(self._seconds())
+            self._rec("tick", seconds=seconds)
+            self.world.enqueue_frame(seconds)
+            self.next_frame += 1
+            self.in_flight += 1
+        if self.in_flight >= 2 or (self.in_flight and (not more or req.quit)):
+            _, img = self.world.read_frame()
+            self.in_flight -= 1
+            self.presenter.upload(img)
+            self.shown += 1
+            self._tick_fps()
+        self._draw()
+        if req.screenshot:
+            t = time.time()
+            stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(t))
+            self.save_screenshot(Path(f"lbwater-{stamp}-{int(t * 1000) % 1000:03d}.png"))
+        return not (req.quit or g.window_should_close(self.win)
+                    or (limit is not None and self.shown >= limit and not self.in_flight))
+
+    def _tick_fps(self) -> None:
+        t = time.perf_counter()
+        if self._t_last is not None:
+            dt = t - self._t_last
+            self._dt_ema = dt if self._dt_ema is None else 0.9 * self._dt_ema + 0.1 * dt
+        self._t_last = t
+
+    @property
+    def fps(self) -> float:
+        return 0.0 if not self._dt_ema else 1.0 / self._dt_ema
+
+    def _draw(self, swap: bool = True) -> None:
+        from app.hud import guard_lines, help_lines, hud_lines
+
+        ctx, c = self.ctx, self.controls
+        ctx.screen.use()
+        ctx.viewport = (0, 0, *self.fb_size)
+        ctx.clear(0.0, 0.0, 0.0, 1.0)
+        self.presenter.draw(self.fb_size)
+        now = self.now()
+        blocks = []
+        if c.show_hud:
+            lines = hud_lines(self.world.stats, fps=self.fps, path=self.path,
+                              size=tuple(self.world.size), device=self.world.device_name,
+                              quality=self.quality.describe(), paused=c.paused,
+                              rain=c.rain_rate if c.rain_on else 0.0, spp=c.spp,
+                              bounces=c.bounces)
+            blocks.append((lines, 8, 8))
+            warn = guard_lines(self.world.stats)
+            if warn:
+                blocks.append((warn, -8, 8, (1.0, 0.6, 0.3, 1.0)))
+        msg = c.status_message(now)
+        if msg:
+            blocks.append(([msg], 8, -8))
+        if now < c.help_until:
+            blocks.append((help_lines(HELP), -8, -8))
+        if blocks:
+            self.hud.draw(blocks, self.fb_size)
+        if swap:
+            self.glfw.swap_buffers(self.win)
+
+    def _toggle_fullscreen(self) -> None:
+        g = self.glfw
+        if self.fullscreen_saved is None:
+            mon = g.get_primary_monitor()
+            mode = g.get_video_mode(mon) if mon else None
+            if mode is None:
+                self.controls.say(self.now(), "no monitor for fullscreen")
+                return
+            self.fullscreen_saved = (*g.get_window_pos(self.win), *g.get_window_size(self.win))
+            g.set_window_monitor(self.win, mon, 0, 0, mode.size.width, mode.size.height,
+                                 mode.refresh_rate)
+        else:
+            x, y, w, h = self.fullscreen_saved
+            self.fullscreen_saved = None
+            g.set_window_monitor(self.win, None, x, y, w, h, 0)
+
+    def snapshot(self) -> np.ndarray:
+        """The shown frame as drawn on the window's framebuffer, without the HUD."""
+        return self.presenter.snapshot(self.fb_size)
+
+    def snapshot_with_hud(self) -> np.ndarray:
+        """The window's framebuffer as drawn (image, HUD and overlays), row 0 on top."""
+        self._draw(swap=False)
+        w, h = self.fb_size
+        data = self.ctx.screen.read(viewport=(0, 0, w, h), components=4, alignment=1)
+        return np.frombuffer(data, np.uint8).reshape(h, w, 4)[::-1].copy()
+
+    def save_screenshot(self, path, hud: bool = False) -> Path:
+        write_png(path, self.snapshot_with_hud() if hud else self.snapshot())
+        self.screenshots.append(Path(path))
+        self.controls.say(self.now(), f"saved {path}")
+        return Path(path)
+
+    def run(self, frames: int | None = None) -> int:
+        while self.step(frames):
+            pass
+        img = self._drain()
+        if img is not None and frames is None:
+            self.presenter.upload(img)
+        return self.shown
+
+    def event_log(self) -> EventLog:
+        q = self.quality
+        header = {"window": list(self._start_window), "cells": q.cells, "scale": q.scale,
+                  "bounces": q.bounces, "spp": self.controls.spp}
+        return EventLog(header, list(self.recording or ()))
+
+    def close(self) -> None:
+        self.world.close()
+        self.ctx.release()
+        self.glfw.destroy_window(self.win)
+        self.glfw.terminate()
+
+
+def run(args) -> int:
+    from app import quality as q
+    from app.scene import load_scene
+    from kernels import get_runtime
+
+    check_args(args)
+    replay = EventLog.load(args.events) if args.events else None
+    require_display()
+    scene = load_scene(args.scene)
+    window_size = parse_size(args.size) if args.size else (scene.render.width,
+                                                           scene.render.height)
+    rt = get_runtime(args.device)
+    frame_seconds = args.frame_time or 1 / 60
+    if replay is not None:
+        h = replay.header
+        window_size = tuple(h.get("window", window_size))
+        quality = q.Quality(int(h["cells"]), float(h["scale"]), int(h["bounces"]), "replayed")
+        spp = int(h.get("spp", 1))
+    else:
+        quality = decide_quality(args, scene, rt, window_size, frame_seconds)
+        spp = args.spp or (scene.render.spp if scene.render.spp in (1, 2, 4) else 1)
+    print(f"lbwater window: {rt.name}; {quality.describe()}; display {display_path(rt)}",
+          flush=True)
+    viewer = Viewer(scene, rt, window_size=window_size, quality=quality, spp=spp,
+                    frame_time=args.frame_time, vsync=not args.no_vsync, upload=args.upload,
+                    replay=replay, record=bool(args.record_events))
+    try:
+        t0 = time.perf_counter()
+        shown = viewer.run(args.frames)
+        elapsed = time.perf_counter() - t0
+        if args.screenshot:
+            viewer.save_screenshot(args.screenshot, hud=args.screenshot_hud)
+        if args.record_events:
+            viewer.event_log().write(args.record_events)
+        print(f"lbwater window: {shown} frames in {elapsed:.2f} s "
+              f"({shown / max(elapsed, 1e-9):.1f} FPS)", flush=True)
+    finally:
+        viewer.close()
+    return 0

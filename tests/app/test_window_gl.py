@@ -1,0 +1,52 @@
+"""The window's GL parts in a headless EGL context (no display): the image reaches the
+framebuffer unchanged through both upload paths, and the HUD draws text over it."""
+
+import numpy as np
+import pytest
+
+from app.hud import Hud
+from app.window import Presenter
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    import moderngl
+
+    try:
+        c = moderngl.create_standalone_context(backend="egl")
+    except Exception as exc:   # a missing libEGL is a setup error, not a skip
+        pytest.fail(f"no EGL context ({exc}); install Mesa's EGL (libegl1, libgl1-mesa-dri); "
+                    ".ci/run does")
+    yield c
+    c.release()
+
+
+@pytest.mark.parametrize("upload", ["pbo", "direct"])
+def test_presented_image_is_the_frame_exactly_row_0_on_top(ctx, upload):
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 256, (48, 64, 4), dtype=np.uint8)
+    img[..., 3] = 255
+    p = Presenter(ctx, upload)
+    p.upload(img)
+    np.testing.assert_array_equal(p.snapshot((64, 48)), img)
+    img2 = img[::2, ::2].copy()             # a new size re-creates the texture
+    p.upload(img2)
+    np.testing.assert_array_equal(p.snapshot((32, 24)), img2)
+    big = p.snapshot((64, 48))              # scaled up: linear filtering, same picture
+    assert np.abs(big[::2, ::2].astype(int) - img2.astype(int)).mean() < 40
+    with pytest.raises(ValueError, match="uint8"):
+        p.upload(img.astype(np.float32))
+
+
+def test_hud_draws_text_over_the_image_only_where_it_is(ctx):
+    fbo = ctx.simple_framebuffer((200, 100), components=4)
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 1.0)
+    hud = Hud(ctx)
+    hud.draw([(["FPS 60.0", "grid 32x24"], 4, 4), (["help"], -4, -4)], (200, 100))
+    px = np.frombuffer(fbo.read(components=4), np.uint8).reshape(100, 200, 4)[::-1]
+    top_left, top_right = px[:40, :90, :3], px[:40, 130:, :3]
+    assert top_left.max() > 200            # white glyphs
+    assert top_right.max() == 0            # nothing drawn there
+    assert px[-25:, -60:, :3].max() > 200  # the block anchored at the bottom-right
+    fbo.release()
