@@ -130,6 +130,25 @@ def find_encoder() -> str:
 
 
 # ---- the encoder -------------------------------------------------------------------------------
+@contextlib.contextmanager
+def _sigint_deferred():
+    """Hold SIGINT for the duration of the block, then raise KeyboardInterrupt if one came."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got = []
+    previous = signal.signal(signal.SIGINT, lambda *a: got.append(True))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if got:
+        raise KeyboardInterrupt
+
+
 class VideoWriter:
     """H.264 yuv420p through imageio-ffmpeg's ``write_frames`` (ffmpeg in a subprocess that
     ignores SIGINT, so Ctrl-C reaches only us and :meth:`close` still finishes the file).
@@ -149,8 +168,11 @@ class VideoWriter:
         self._gen.send(None)
 
     def write(self, rgba: np.ndarray) -> None:
-        self._gen.send(np.ascontiguousarray(rgba[..., :3]))
-        self.frames += 1
+        """Send one frame; a Ctrl-C arriving meanwhile is held until the frame is whole (an
+        interrupt inside the encoder's generator would kill ffmpeg and lose the file)."""
+        with _sigint_deferred():
+            self._gen.send(np.ascontiguousarray(rgba[..., :3]))
+            self.frames += 1
 
     def close(self) -> None:
         if self._gen is not None:
@@ -220,24 +242,31 @@ def run(args) -> int:
     n = frame_count(args, timeline)
     # every check that can fail without simulating comes first
     video = None
-    if args.output is not None:
-        find_encoder()
-        out = check_output(args.output, args.force)
-    frames_dir = check_frames_dir(args.frames_dir, args.force) if args.frames_dir else None
-
-    world = open_world(scene, args.device, width=args.width, height=args.height, spp=args.spp,
-                       bounces=args.bounces, seed=args.seed)
-    size = world.size
+    size = (args.width or scene.render.width, args.height or scene.render.height)
     if args.output is not None:
         if size[0] % 2 or size[1] % 2:
             raise InputError(f"{args.scene}: image {size[0]}x{size[1]} must have even sides for "
-                             "H.264 (use --width/--height)")
-        video = VideoWriter(partial_path(out), size, args.fps, args.quality)
+                             "H.264 yuv420p (use --width/--height)")
+        find_encoder()
+        out = check_output(args.output, args.force)
+    frames_dir = check_frames_dir(args.frames_dir, args.force) if args.frames_dir else None
+    try:
+        world = open_world(scene, args.device, width=size[0], height=size[1], spp=args.spp,
+                           bounces=args.bounces, seed=args.seed)
+        if tuple(world.size) != size:
+            raise RuntimeError(f"internal error: asked {size}, the World renders {world.size}")
+        if args.output is not None:
+            video = VideoWriter(partial_path(out), size, args.fps, args.quality)
+    except BaseException:   # nothing was rendered: leave no empty partial file behind
+        if args.output is not None:
+            with contextlib.suppress(OSError):
+                partial_path(out).unlink()
+        raise
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     bar = Progress(n, not args.quiet)
     dt = 1.0 / args.fps
     guard_notes: list[str] = []
-    done, t0 = 0, time.perf_counter()
+    done, t0, write_s = 0, time.perf_counter(), 0.0
     try:
         timeline.apply(world, 0)
         world.enqueue_frame(dt)
@@ -253,10 +282,12 @@ def run(args) -> int:
             if st is not None and st.frame == i and st.guard and (
                     st.guard.get("nan") or st.guard.get("acted")):
                 guard_notes.append(f"frame {i}: {st.guard.get('report', 'guard acted')}")
+            tw = time.perf_counter()
             if video is not None:
                 video.write(img)
             if frames_dir is not None:
                 _write_png(frames_dir, i, img)
+            write_s += time.perf_counter() - tw
             done += 1
             bar.update(done, f"{len(guard_notes)} guard warnings" if guard_notes else "")
     except BaseException:
@@ -281,5 +312,6 @@ def run(args) -> int:
     guard = (f"{len(guard_notes)} guard warnings (first: {guard_notes[0]})" if guard_notes
              else "guard: ok")
     log(f"{target}: {n} frames {size[0]}x{size[1]} ({n / args.fps:.2f} s at {args.fps:g} fps), "
-        f"{wall:.1f} s wall, mean {n / wall:.2f} FPS, {guard}")
+        f"{wall:.1f} s wall, mean {n / wall:.2f} FPS, encoding {1e3 * write_s / n:.1f} ms/frame "
+        f"({100 * write_s / wall:.0f}% of the wall time), {guard}")
     return 0

@@ -125,8 +125,46 @@ def test_sigint_leaves_a_playable_partial_video(scene, tmp_path):
         time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130
+    assert proc.returncode == 130, err
     partial = tmp_path / "v.partial.mp4"
-    assert str(partial) in err and not out.exists()
+    assert str(partial) in err and not out.exists(), err
     _, decoded = _decode(partial)
-    assert len(decoded) >= 2
+    assert len(decoded) >= 2, err
+
+
+class _Stream:
+    def __init__(self, tty):
+        self.tty, self.text = tty, ""
+
+    def isatty(self):
+        return self.tty
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+
+def test_progress_bar_only_on_a_terminal():
+    from app.capture import Progress
+
+    for tty in (True, False):
+        s = _Stream(tty)
+        bar = Progress(4, True, stream=s)
+        for k in range(1, 5):
+            bar._last = 0.0
+            bar.update(k)
+        bar.finish()
+        if tty:
+            assert "4/4" in s.text and "ETA" in s.text and s.text.endswith("\n")
+        else:
+            assert s.text == ""
+
+
+def test_odd_scene_size_fails_before_anything_is_written(tmp_path, capsys):
+    scene = tmp_path / "odd.toml"
+    scene.write_text(SCENE.replace("width = 48", "width = 47"))
+    assert main(["capture", str(scene), "-o", str(tmp_path / "v.mp4"), "--frames", "2"]) == 2
+    assert "even" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["odd.toml"]
