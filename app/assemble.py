@@ -229,17 +229,6 @@ def caustic_box(scene: Scene, water: WaterSpec | None, instances: dict):
     return PoolBox(lo, hi, (lo[0], lo[2], hi[0], hi[2]), oy + water.depth, pool)
 
 
-def with_caustics(scene: Scene, mode: str | None) -> Scene:
-    """``scene`` with ``[shading] caustics = mode`` (the ``--caustics`` of render, capture and
-    window); unchanged when ``mode`` is None."""
-    from app.scene import SHADING_SCHEMA, ShadingSpec
-
-    if mode is None:
-        return scene
-    sh = scene.shading or ShadingSpec(**{k: f.default for k, f in SHADING_SCHEMA.items()})
-    return dataclasses.replace(scene, shading=dataclasses.replace(sh, caustics=str(mode)))
-
-
 def caustic_settings(scene: Scene, mode: str | None = None):
     """``[shading] caustics*`` as :class:`raytrace.caustics.CausticSettings` (``mode``
     overrides), validated; a one-line InputError naming the scene file."""

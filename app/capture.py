@@ -211,8 +211,8 @@ def frame_count(args, timeline) -> int:
 
 
 def run(args) -> int:
-    from app.assemble import caustic_settings, with_caustics
-    from app.frames import open_world
+    from app.assemble import caustic_settings
+    from app.frames import open_world, with_shading
     from app.scene import load_scene
     from app.timeline import Timeline
 
@@ -220,7 +220,7 @@ def run(args) -> int:
         raise InputError("give -o VIDEO.mp4 and/or --frames-dir DIR")
     _check_numbers(args)
     scene = load_scene(args.scene)
-    scene = with_caustics(scene, args.caustics)
+    scene = with_shading(scene, {"caustics": args.caustics} if args.caustics else None)
     caustic_settings(scene)  # a bad mode fails before any simulation
     timeline = Timeline(scene, args.fps)
     n = frame_count(args, timeline)

@@ -723,7 +723,8 @@ class Viewer:
 
 def run(args) -> int:
     from app import quality as q
-    from app.assemble import caustic_settings, with_caustics
+    from app.assemble import caustic_settings
+    from app.frames import with_shading
     from app.scene import load_scene
     from kernels import get_runtime
 
@@ -731,7 +732,8 @@ def run(args) -> int:
     replay = EventLog.load(args.events) if args.events else None
     require_display()
     scene = load_scene(args.scene)
-    scene = with_caustics(scene, getattr(args, "caustics", None))
+    mode = getattr(args, "caustics", None)
+    scene = with_shading(scene, {"caustics": mode} if mode else None)
     caustic_settings(scene)  # a bad mode fails before the window opens
     window_size = parse_size(args.size) if args.size else (scene.render.width,
                                                            scene.render.height)

@@ -447,6 +447,15 @@ class World:
         self.drain()
         return self.renderer.read_aov()
 
+    def read_caustics(self) -> dict | None:
+        """The last frame's caustic map, irradiance (W/m^2, rgb) per face of the pool:
+        {"floor": (nz, nx, 3), "z0", "z1": (ny, nx, 3), "x0", "x1": (ny, nz, 3)}; None when
+        caustics are off. Synchronises (studies, tests)."""
+        self.drain()
+        if self._caustics is None or not self._caustics.enabled:
+            return None
+        return self._caustics.read_map()
+
     def read_radiance(self) -> np.ndarray:
         """Linear radiance (height, width, 3) of the last frame, before tonemapping."""
         self.drain()

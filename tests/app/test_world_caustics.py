@@ -137,11 +137,11 @@ def test_the_window_key_toggles_the_worlds_caustics_and_a_rebuilt_world_keeps_th
     assert rebuilt.caustics == "off", "the user's choice outlives a rebuild"
 
 
-def test_with_caustics_overrides_the_scene_for_capture_and_window(tmp_path):
-    from app.assemble import caustic_settings, with_caustics
+def test_with_shading_overrides_caustics_for_capture_and_window(tmp_path):
+    from app.assemble import caustic_settings
+    from app.frames import with_shading
 
     bare = parse_scene(FLAT.replace("[shading]", "[shading_unused]").split(
         "[shading_unused]")[0], tmp_path / "bare.toml")
     assert bare.shading is None
-    assert caustic_settings(with_caustics(bare, "traced")).mode == "traced"
-    assert with_caustics(bare, None) is bare
+    assert caustic_settings(with_shading(bare, {"caustics": "traced"})).mode == "traced"
