@@ -44,6 +44,9 @@ def add_arguments(p) -> None:
     p.add_argument("--bounces", type=int, help="maximum reflection/refraction depth")
     p.add_argument("--seed", type=int, help="random seed (jitter, rain); default the scene's")
     p.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
+    p.add_argument("--caustics", choices=("off", "traced", "projected"),
+                   help="caustics under the water (key C in the window); default from "
+                        "[shading] caustics")
     p.add_argument("--frames-dir", metavar="DIR",
                    help="write a PNG sequence DIR/frame_000000.png ... (instead of or besides -o)")
     p.add_argument("--quality", type=float, default=8.0,
@@ -230,7 +233,8 @@ def frame_count(args, timeline) -> int:
 
 
 def run(args) -> int:
-    from app.frames import open_world
+    from app.assemble import caustic_settings
+    from app.frames import open_world, with_shading
     from app.scene import load_scene
     from app.timeline import Timeline
 
@@ -238,6 +242,8 @@ def run(args) -> int:
         raise InputError("give -o VIDEO.mp4 and/or --frames-dir DIR")
     _check_numbers(args)
     scene = load_scene(args.scene)
+    scene = with_shading(scene, {"caustics": args.caustics} if args.caustics else None)
+    caustic_settings(scene)  # a bad mode fails before any simulation
     timeline = Timeline(scene, args.fps)
     n = frame_count(args, timeline)
     # every check that can fail without simulating comes first

@@ -225,7 +225,7 @@ class Controls:
         self.rain_on = False
         self.rain_rate = RAIN_RATE_DEFAULT
         self._rain_dirty = False
-        self.caustics = False
+        self.caustics: bool | None = None  # None: the scene's [shading] caustics
         self.help_until = HELP_SECONDS   # seconds of wall time since the start
         self.show_hud = True
         self.message = ""
@@ -343,7 +343,7 @@ class Controls:
         elif a == Action.SCREENSHOT:
             r.screenshot = True
         elif a == Action.TOGGLE_CAUSTICS:
-            self.caustics = not self.caustics
+            self.caustics = getattr(world, "caustics", "off") == "off"
             setter = getattr(world, "set_caustics", None)
             if setter is None:
                 self.say(now, "caustics are not in this build")
@@ -408,5 +408,5 @@ class Controls:
         rain and caustics; they reach it with the next :meth:`apply`."""
         self._camera_dirty = self._camera_dirty or camera
         self._rain_dirty = self.rain_on
-        if self.caustics and hasattr(world, "set_caustics"):
-            world.set_caustics(True)
+        if self.caustics is not None and hasattr(world, "set_caustics"):
+            world.set_caustics(self.caustics)

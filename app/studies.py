@@ -19,6 +19,10 @@ Studies (each speed-accuracy trade-off of the design gets a chart of error again
                      reference (exact Fresnel, no contribution cut-off), against ms per frame.
 ``grid-vs-pixels``   the image difference when the water grid is refined, against the pixels a
                      water cell covers: where more cells stop changing the picture.
+``caustics-noise``   the caustic map of the pool floor against photons per frame: relative RMS
+                     error against a high-photon reference of the same water, frame-to-frame
+                     flicker of still water (only the jitter changes) without and with the
+                     temporal blend, and the caustics stage's device ms.
 
 ``--quick`` runs each at the tiny size the tests use (seconds on PoCL); times then measure a
 shared CPU, not a GPU: read the charts' shapes, not their numbers.
@@ -573,6 +577,74 @@ def grid_vs_pixels_chart(rows, path, ctx):
     charts.save(fig, path, source=ctx.source)
 
 
+def _rel_rms(a, b) -> float:
+    return float(np.sqrt(np.mean((a - b) ** 2)) / max(np.sqrt(np.mean(b**2)), 1e-30))
+
+
+def caustics_noise(ctx) -> list[dict]:
+    """The study scene's water after 0.4 s, then held still; floor maps per photon count."""
+    from app.frames import open_world
+
+    if ctx.quick:
+        photons, reference, cells, res, settle = (1024, 4096, 16384), 131072, 40, 64, 4
+    else:
+        photons, reference, cells, res, settle = ((4096, 16384, 65536, 262144, 1048576),
+                                                  4194304, 100, 256, 8)
+
+    def world(n: int, blend: float):
+        w = open_world(study_scene(), ctx.rt, width=16, height=16, cells=cells, shading={
+            "caustics": "traced", "caustic_photons": n, "caustic_resolution": res,
+            "caustic_blend": blend})
+        w.frame(0.4)
+        return w
+
+    def floor(w) -> np.ndarray:
+        return w.read_caustics()["floor"][..., 0].astype(np.float64)
+
+    ref = floor(world(reference, 0.0))
+    rows = []
+    for n in photons:
+        w = world(n, 0.0)
+        a = floor(w)
+        w.frame(0.0)
+        b = floor(w)
+        ms = sum(v for k, v in w.stats.stage_ms.items() if k.startswith("caustics."))
+        wb = world(n, 0.5)
+        for _ in range(settle):
+            wb.frame(0.0)
+        m1 = floor(wb)
+        wb.frame(0.0)
+        m2 = floor(wb)
+        nz, nx = a.shape
+        rows.append({"photons": n, "photons_per_floor_texel": round(n / (nx * nz), 4),
+                     "error_vs_reference": round(_rel_rms(a, ref), 5),
+                     "flicker": round(_rel_rms(b, a), 5),
+                     "flicker_blended": round(_rel_rms(m2, m1), 5), "blend": 0.5,
+                     "caustics_ms": round(ms, 3), "texels": f"{nx}x{nz}",
+                     "reference_photons": reference})
+        ctx.log(f"{n:>8d} photons: error {rows[-1]['error_vs_reference']:.4f}, flicker "
+                f"{rows[-1]['flicker']:.4f} ({rows[-1]['flicker_blended']:.4f} blended), "
+                f"{ms:.2f} ms")
+    return rows
+
+
+def caustics_noise_chart(rows, path, ctx):
+    from app import charts
+
+    fig, ax = charts.figure(f"Caustic noise against photons per frame ({rows[0]['texels']} "
+                            "floor texels)", "photons per frame",
+                            "relative RMS over the pool floor", log=("x", "y"))
+    n = [r["photons"] for r in rows]
+    charts.series(ax, n, [r["error_vs_reference"] for r in rows],
+                  label=f"error vs {rows[0]['reference_photons']} photons", index=0)
+    charts.series(ax, n, [r["flicker"] for r in rows], label="frame-to-frame flicker", index=1)
+    charts.series(ax, n, [r["flicker_blended"] for r in rows],
+                  label=f"flicker, blend {rows[0]['blend']}", index=2)
+    k = rows[0]["flicker"] * math.sqrt(n[0])
+    charts.reference(ax, n, [k / math.sqrt(x) for x in n], label="photons^-1/2")
+    charts.save(fig, path, source=ctx.source)
+
+
 STUDIES = {s.name: s for s in (
     Study("lbm-resolution", lbm_resolution, lbm_resolution_chart,
           "Stoker and seiche error against ms per step over resolutions"),
@@ -590,6 +662,8 @@ STUDIES = {s.name: s for s in (
           "image error vs the secondary-ray cut-off"),
     Study("grid-vs-pixels", grid_vs_pixels, grid_vs_pixels_chart,
           "image change when the grid is refined, vs pixels per cell"),
+    Study("caustics-noise", caustics_noise, caustics_noise_chart,
+          "caustic map error and flicker against photons per frame"),
 )}
 
 

@@ -71,6 +71,9 @@ def add_arguments(p) -> None:
                    help="auto: measure and pick grid, scale and bounces for --target-fps; "
                         "low/medium/high: fixed presets")
     p.add_argument("--target-fps", type=float, default=60.0, help="frame rate auto aims for")
+    p.add_argument("--caustics", choices=("off", "traced", "projected"),
+                   help="caustics under the water (key C in the window); default from "
+                        "[shading] caustics")
     p.add_argument("--cells", type=int, help="water cells along the pool's longer side")
     p.add_argument("--scale", type=float, help="image pixels per window pixel, (0, 1]")
     p.add_argument("--bounces", type=int, help="reflection/refraction depth")
@@ -720,6 +723,8 @@ class Viewer:
 
 def run(args) -> int:
     from app import quality as q
+    from app.assemble import caustic_settings
+    from app.frames import with_shading
     from app.scene import load_scene
     from kernels import get_runtime
 
@@ -727,6 +732,9 @@ def run(args) -> int:
     replay = EventLog.load(args.events) if args.events else None
     require_display()
     scene = load_scene(args.scene)
+    mode = getattr(args, "caustics", None)
+    scene = with_shading(scene, {"caustics": mode} if mode else None)
+    caustic_settings(scene)  # a bad mode fails before the window opens
     window_size = parse_size(args.size) if args.size else (scene.render.width,
                                                            scene.render.height)
     rt = get_runtime(args.device)

@@ -120,7 +120,7 @@ class World:
     its longer side); ``water_steps`` overrides ``[pool] steps`` (LBM steps before the first
     frame); ``seed`` overrides ``[shading] seed``; ``rebuild_water_bvh`` rebuilds the water BVH
     each frame instead of refitting it; ``caustics`` (off | traced) overrides ``[shading]
-    caustics``.
+    caustics`` (True/False: traced/off).
     """
 
     def __init__(self, scene, device=None, *, width=None, height=None, spp=None, bounces=None,
@@ -149,7 +149,7 @@ class World:
             scene, width=width, height=height, spp=spp, bounces=bounces, aov=aov, seed=seed))
         self._caustic_box = a.caustic_box
         self._caustics = None           # raytrace.caustics.Caustics, made when first turned on
-        self.set_caustics(caustic_settings(scene, caustics).mode)
+        self.set_caustics(caustic_settings(scene).mode if caustics is None else caustics)
         c = scene.camera
         self.set_camera(c.eye, c.target, c.up, c.fov)
         self._rain = scene.water.rain if scene.water is not None else None
@@ -236,12 +236,14 @@ class World:
             raise InputError(str(exc)) from None
         self.rain_rate = rate
 
-    def set_caustics(self, mode: str) -> None:
-        """Caustics for the next frames: ``off`` (shadow rays through the water) or ``traced``
-        (photons into a caustic map over the pool; the window's C key toggles). The other
-        ``[shading] caustic_*`` settings stay the scene's."""
+    def set_caustics(self, mode: str | bool) -> None:
+        """Caustics for the next frames: ``off`` (or False: shadow rays through the water) or
+        ``traced`` (or True: photons into a caustic map over the pool; the window's C key
+        toggles). The other ``[shading] caustic_*`` settings stay the scene's."""
         from app.assemble import caustic_settings
 
+        if isinstance(mode, bool):
+            mode = "traced" if mode else "off"
         mode = caustic_settings(self.scene, mode).mode
         if mode == "off":
             if self._caustics is not None:
@@ -444,6 +446,15 @@ class World:
         """Primary-hit AOVs of the last frame (the World must be made with ``aov=True``)."""
         self.drain()
         return self.renderer.read_aov()
+
+    def read_caustics(self) -> dict | None:
+        """The last frame's caustic map, irradiance (W/m^2, rgb) per face of the pool:
+        {"floor": (nz, nx, 3), "z0", "z1": (ny, nx, 3), "x0", "x1": (ny, nz, 3)}; None when
+        caustics are off. Synchronises (studies, tests)."""
+        self.drain()
+        if self._caustics is None or not self._caustics.enabled:
+            return None
+        return self._caustics.read_map()
 
     def read_radiance(self) -> np.ndarray:
         """Linear radiance (height, width, 3) of the last frame, before tonemapping."""

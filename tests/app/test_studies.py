@@ -55,6 +55,12 @@ def test_study_writes_csv_and_chart(rt, out, name):
         ppc = [float(r["pixels_per_cell"]) for r in rows]
         assert ppc == sorted(ppc, reverse=True) and ppc[0] > 3 * ppc[-1]
         assert float(rows[0]["diff_to_next"]) > 0
+    elif name == "caustics-noise":
+        err = [float(r["error_vs_reference"]) for r in rows]
+        flick = [float(r["flicker"]) for r in rows]
+        assert err == sorted(err, reverse=True) and err[-1] < 0.6 * err[0]
+        assert flick[-1] < 0.6 * flick[0] and float(rows[0]["flicker"]) > 0
+        assert all(float(r["flicker_blended"]) < float(r["flicker"]) for r in rows)
 
 
 def test_fit_order_recovers_a_known_power():

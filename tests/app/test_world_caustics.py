@@ -116,3 +116,32 @@ def test_bad_caustic_settings_are_one_line_errors(flat, rt, tmp_path):
     w = World(nopool, rt)
     with pytest.raises(InputError, match="no pool"):
         w.set_caustics("traced")
+
+
+def test_the_window_key_toggles_the_worlds_caustics_and_a_rebuilt_world_keeps_the_choice(
+        flat, rt):
+    from app.controls import Action, Controls, OrbitCamera, Water
+
+    on = World(flat, rt, caustics=True)   # a bool, as the window passes
+    assert on.caustics == "traced"
+    c = Controls(OrbitCamera.from_look((0.5, 1.4, -0.3), (0.5, 0.0, 0.55), 50.0),
+                 Water((0, 0, 0), (1, 1), 0.3, 1 / 16), window_size=(48, 32),
+                 image_size=(48, 32))
+    c.action(on, Action.TOGGLE_CAUSTICS)
+    assert on.caustics == "off" and c.caustics is False
+    c.action(on, Action.TOGGLE_CAUSTICS)
+    assert on.caustics == "traced"
+    c.action(on, Action.TOGGLE_CAUSTICS)
+    rebuilt = World(flat, rt, caustics="traced")
+    c.reapply(rebuilt)
+    assert rebuilt.caustics == "off", "the user's choice outlives a rebuild"
+
+
+def test_with_shading_overrides_caustics_for_capture_and_window(tmp_path):
+    from app.assemble import caustic_settings
+    from app.frames import with_shading
+
+    bare = parse_scene(FLAT.replace("[shading]", "[shading_unused]").split(
+        "[shading_unused]")[0], tmp_path / "bare.toml")
+    assert bare.shading is None
+    assert caustic_settings(with_shading(bare, {"caustics": "traced"})).mode == "traced"
