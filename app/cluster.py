@@ -65,20 +65,21 @@ class Worker:
     """One Ray actor: one OpenCL device and, for a capture, a World that renders snapshots.
 
     ``device``: the user's ``--device`` (None: the actor's GPU when Ray gave it one, else the
-    default device). ``capture``: (scene path, World keyword arguments, frame 0's snapshot)."""
+    default device). For a capture: the scene file, the World's keyword arguments and frame 0's
+    snapshot."""
 
-    def __init__(self, device: str | None, capture: tuple | None = None):
+    def __init__(self, device: str | None, scene_path: str | None = None,
+                 kw: dict | None = None, first: bytes | None = None):
         from kernels import get_runtime
 
         os.environ.setdefault("POCL_AFFINITY", "0")
         self.rt = get_runtime(self._device_spec(device))
         self.world = None
-        if capture is not None:
+        if scene_path is not None:
             from app.frames import open_world
             from app.scene import load_scene
 
-            path, kw, first = capture
-            self.world = open_world(load_scene(path), self.rt, **kw)
+            self.world = open_world(load_scene(scene_path), self.rt, **(kw or {}))
             self.world.render_snapshot(first, image=False)   # frame 0's BVH topology
 
     @staticmethod
@@ -152,10 +153,9 @@ class Pool:
             raise InputError(f"--workers {self.workers}: the Ray cluster has {have} {what}")
         opts = {"num_gpus": 1} if self.use_gpus else {"num_cpus": 1}
         self._cls = ray.remote(Worker).options(max_restarts=0, max_task_retries=0, **opts)
-        self._capture = capture
+        self._args = ()
         if capture is not None:   # one copy of frame 0's snapshot in the object store
-            capture = (capture[0], capture[1], ray.put(capture[2]))
-        self._args = capture
+            self._args = (capture[0], capture[1], ray.put(capture[2]))
         self.replacements = self.workers
         self.live: list = []         # actors that answered info()
         self.starting: dict = {}     # info ref -> actor
@@ -165,7 +165,7 @@ class Pool:
         self._wait_started(all_of=True)
 
     def _start(self) -> None:
-        a = self._cls.remote(self.device, self._args)
+        a = self._cls.remote(self.device, *self._args)
         self.starting[a.info.remote()] = a
 
     def _wait_started(self, all_of: bool = False, timeout: float = 0.0) -> None:
@@ -185,7 +185,13 @@ class Pool:
             try:
                 self.info[a] = ray.get(ready[0])
             except ray.exceptions.RayActorError as exc:
-                raise _cause(exc) from None
+                if getattr(exc, "actor_init_failed", False):   # the scene, the device...
+                    last = str(exc).strip().splitlines()[-1].strip()
+                    raise ClusterError(f"a Ray worker failed to start: {last}") from None
+                if all_of:
+                    raise ClusterError(f"a Ray worker died while starting: "
+                                       f"{str(exc).strip().splitlines()[0]}") from None
+                continue     # a replacement that died: the next lost() may start another
             self.live.append(a)
 
     def lost(self, actor) -> None:
