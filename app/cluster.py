@@ -150,6 +150,7 @@ class Pool:
         have = gpus if self.use_gpus else int(res.get("CPU", 0))
         what = "GPUs" if self.use_gpus else "CPUs"
         if self.workers > have:
+            self.close()
             raise InputError(f"--workers {self.workers}: the Ray cluster has {have} {what}")
         opts = {"num_gpus": 1} if self.use_gpus else {"num_cpus": 1}
         self._cls = ray.remote(Worker).options(max_restarts=0, max_task_retries=0, **opts)
@@ -160,9 +161,13 @@ class Pool:
         self.live: list = []         # actors that answered info()
         self.starting: dict = {}     # info ref -> actor
         self.info: dict = {}         # actor -> info dict
-        for _ in range(self.workers):
-            self._start()
-        self._wait_started(all_of=True)
+        try:
+            for _ in range(self.workers):
+                self._start()
+            self._wait_started(all_of=True)
+        except BaseException:     # Ctrl-C or a worker that cannot start: stop them all
+            self.close()
+            raise
 
     def _start(self) -> None:
         a = self._cls.remote(self.device, *self._args)
@@ -191,7 +196,10 @@ class Pool:
                 if all_of:
                     raise ClusterError(f"a Ray worker died while starting: "
                                        f"{str(exc).strip().splitlines()[0]}") from None
-                continue     # a replacement that died: the next lost() may start another
+                if self.replacements > 0:   # a replacement that died: try another
+                    self.replacements -= 1
+                    self._start()
+                continue
             self.live.append(a)
 
     def lost(self, actor) -> None:
