@@ -51,6 +51,11 @@ def add_arguments(p) -> None:
                    help="write a PNG sequence DIR/frame_000000.png ... (instead of or besides -o)")
     p.add_argument("--quality", type=float, default=8.0,
                    help="H.264 quality 0-10 (imageio-ffmpeg's scale; default 8)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="render on N Ray actors (one per GPU, else per CPU), this process "
+                        "stepping the water; same bytes as without (needs lbwater[cluster])")
+    p.add_argument("--ray-address", metavar="ADDR",
+                   help="Ray cluster to join (HOST:PORT or auto; default: a local Ray)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
@@ -232,6 +237,50 @@ def frame_count(args, timeline) -> int:
     return max(1, round(seconds * args.fps))
 
 
+def _local_frames(world, timeline, n: int, dt: float):
+    """Yield (i, RGBA8, guard dict) for frames 0..n-1 of one World, frame i+1 enqueued before
+    frame i is read (it renders while i is encoded)."""
+    timeline.apply(world, 0)
+    world.enqueue_frame(dt)
+    for i in range(n):
+        if i + 1 < n:
+            timeline.apply(world, i + 1)
+            world.enqueue_frame(dt)
+        index, img = world.read_frame()
+        if index != i:
+            raise RuntimeError(f"internal error: frame {index} came back for frame {i}")
+        st = world.stats
+        guard = st.guard if st is not None and st.frame == i and st.guard else {}
+        yield i, np.array(img, copy=True), guard
+
+
+def _cluster_frames(args, scene, timeline, n: int, dt: float, kw: dict, stack):
+    """(image size, frames) for ``--workers``: this process steps the water (a World that
+    renders nothing: World.snapshot_frame), Ray actors render the snapshots (app.cluster)."""
+    from app import cluster, snapshot
+    from app.frames import open_world
+
+    stepper = open_world(scene, args.device, **{**kw, "width": 8, "height": 8, "spp": 1})
+    stack.callback(stepper.close)
+
+    def snapshot_of(i: int) -> bytes:
+        timeline.apply(stepper, i)
+        return stepper.snapshot_frame(dt)
+
+    first = snapshot_of(0)
+    pool = cluster.Pool(args.workers, address=args.ray_address, device=args.device,
+                        capture=(str(Path(args.scene).resolve()), kw, first))
+    stack.callback(pool.close)
+    size = tuple(pool.info[pool.live[0]]["size"])
+    kept = {0: first}
+
+    def frames():
+        for i, img, snap in cluster.render_frames(
+                pool, n, lambda i: kept.pop(i) if i in kept else snapshot_of(i)):
+            yield i, img, snapshot.peek(snap)["guard"]
+    return size, frames()
+
+
 def run(args) -> int:
     from app.assemble import caustic_settings
     from app.frames import open_world, with_shading
@@ -241,6 +290,14 @@ def run(args) -> int:
     if args.output is None and args.frames_dir is None:
         raise InputError("give -o VIDEO.mp4 and/or --frames-dir DIR")
     _check_numbers(args)
+    workers = getattr(args, "workers", None)
+    if workers is not None:
+        from app.cluster import check_workers, import_ray
+
+        check_workers(workers)
+        import_ray()
+    elif getattr(args, "ray_address", None):
+        raise InputError("--ray-address needs --workers N")
     scene = load_scene(args.scene)
     scene = with_shading(scene, {"caustics": args.caustics} if args.caustics else None)
     caustic_settings(scene)  # a bad mode fails before any simulation
@@ -256,60 +313,50 @@ def run(args) -> int:
         find_encoder()
         out = check_output(args.output, args.force)
     frames_dir = check_frames_dir(args.frames_dir, args.force) if args.frames_dir else None
-    try:
-        world = open_world(scene, args.device, width=size[0], height=size[1], spp=args.spp,
-                           bounces=args.bounces, seed=args.seed)
-        if tuple(world.size) != size:
-            raise RuntimeError(f"internal error: asked {size}, the World renders {world.size}")
+
+    kw = {"width": size[0], "height": size[1], "spp": args.spp, "bounces": args.bounces,
+          "seed": args.seed, "caustics": args.caustics}
+    dt = 1.0 / args.fps
+    log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
+    guard_notes: list[str] = []
+    done, write_s = 0, 0.0
+    with contextlib.ExitStack() as stack:
+        if workers is not None:
+            size_got, frames = _cluster_frames(args, scene, timeline, n, dt, kw, stack)
+        else:
+            world = open_world(scene, args.device, **kw)
+            stack.callback(world.close)
+            size_got, frames = world.size, _local_frames(world, timeline, n, dt)
+        if tuple(size_got) != size:
+            raise RuntimeError(f"internal error: asked {size}, the World renders {size_got}")
         if args.output is not None:
             video = VideoWriter(partial_path(out), size, args.fps, args.quality)
-    except BaseException:   # nothing was rendered: leave no empty partial file behind
-        if args.output is not None:
-            with contextlib.suppress(OSError):
-                partial_path(out).unlink()
-        raise
-    log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
-    bar = Progress(n, not args.quiet)
-    dt = 1.0 / args.fps
-    guard_notes: list[str] = []
-    done, t0, write_s = 0, time.perf_counter(), 0.0
-    try:
-        timeline.apply(world, 0)
-        world.enqueue_frame(dt)
-        for i in range(n):
-            if i + 1 < n:            # the next frame renders while this one is encoded
-                timeline.apply(world, i + 1)
-                world.enqueue_frame(dt)
-            index, img = world.read_frame()
-            if index != i:
-                raise RuntimeError(f"internal error: frame {index} came back for frame {i}")
-            img = np.array(img, copy=True)
-            st = world.stats
-            if st is not None and st.frame == i and st.guard and (
-                    st.guard.get("nan") or st.guard.get("acted")):
-                guard_notes.append(f"frame {i}: {st.guard.get('report', 'guard acted')}")
-            tw = time.perf_counter()
+        bar = Progress(n, not args.quiet)
+        t0 = time.perf_counter()
+        try:
+            for i, img, guard in frames:
+                if guard.get("nan") or guard.get("acted"):
+                    guard_notes.append(f"frame {i}: {guard.get('report', 'guard acted')}")
+                tw = time.perf_counter()
+                if video is not None:
+                    video.write(img)
+                if frames_dir is not None:
+                    _write_png(frames_dir, i, img)
+                write_s += time.perf_counter() - tw
+                done += 1
+                bar.update(done, f"{len(guard_notes)} guard warnings" if guard_notes else "")
+        except BaseException:
+            bar.finish()
+            where = ""
             if video is not None:
-                video.write(img)
+                with contextlib.suppress(Exception):
+                    video.close()
+                where = f"; partial video ({done} frames): {video.path}"
             if frames_dir is not None:
-                _write_png(frames_dir, i, img)
-            write_s += time.perf_counter() - tw
-            done += 1
-            bar.update(done, f"{len(guard_notes)} guard warnings" if guard_notes else "")
-    except BaseException:
+                where += f"; {done} PNG frames in {frames_dir}"
+            print(f"lbwater capture: stopped after {done} of {n} frames{where}", file=sys.stderr)
+            raise
         bar.finish()
-        where = ""
-        if video is not None:
-            with contextlib.suppress(Exception):
-                video.close()
-            where = f"; partial video ({done} frames): {video.path}"
-        if frames_dir is not None:
-            where += f"; {done} PNG frames in {frames_dir}"
-        print(f"lbwater capture: stopped after {done} of {n} frames{where}", file=sys.stderr)
-        world.close()
-        raise
-    bar.finish()
-    world.close()
     if video is not None:
         video.close()
         os.replace(video.path, out)
@@ -317,7 +364,8 @@ def run(args) -> int:
     target = ", ".join(str(p) for p in (args.output, args.frames_dir) if p)
     guard = (f"{len(guard_notes)} guard warnings (first: {guard_notes[0]})" if guard_notes
              else "guard: ok")
-    log(f"{target}: {n} frames {size[0]}x{size[1]} ({n / args.fps:.2f} s at {args.fps:g} fps), "
-        f"{wall:.1f} s wall, mean {n / wall:.2f} FPS, encoding {1e3 * write_s / n:.1f} ms/frame "
-        f"({100 * write_s / wall:.0f}% of the wall time), {guard}")
+    on = f" on {workers} Ray workers" if workers is not None else ""
+    log(f"{target}: {n} frames {size[0]}x{size[1]} ({n / args.fps:.2f} s at {args.fps:g} fps)"
+        f"{on}, {wall:.1f} s wall, mean {n / wall:.2f} FPS, encoding {1e3 * write_s / n:.1f} "
+        f"ms/frame ({100 * write_s / wall:.0f}% of the wall time), {guard}")
     return 0

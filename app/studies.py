@@ -4,7 +4,8 @@ of error against time) and prints one line per point.
     lbwater study lbm-resolution -o out/studies            # full size (GPU minutes)
     lbwater study all -o out/studies --quick               # every study, tiny (PoCL seconds)
 
-Studies (each speed-accuracy trade-off of the design gets a chart of error against time):
+Studies (each speed-accuracy trade-off gets a chart of error against time; README "Charts:
+speed against accuracy"):
 
 ``lbm-resolution``   Stoker's wet dam break (L1 error of h against the analytic solution) and the
                      linear seiche (period error against 2L/sqrt(gH)) against ms per LBM step, over

@@ -87,6 +87,11 @@ def add_arguments(p) -> None:
                    help="simulated seconds of water per frame (default 1/60)")
     p.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
     p.add_argument("-o", "--out", default="out/sweep", help="folder for sweep.csv/json, charts")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="measure on N Ray actors (one per GPU, else per CPU), one point per "
+                        "device at a time (needs lbwater[cluster])")
+    p.add_argument("--ray-address", metavar="ADDR",
+                   help="Ray cluster to join (HOST:PORT or auto; default: a local Ray)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -187,16 +192,42 @@ def save_rows(out: Path, rows: list[dict]) -> None:
                                   for r in rows])
 
 
+def _key_row(args, device: str, point: tuple) -> dict:
+    cells, size, bounces, spp = point
+    return {"scene": str(args.scene), "device": device, "cells": cells, "width": size[0],
+            "height": size[1], "bounces": bounces, "spp": spp, "frames": args.frames,
+            "warmup": args.warmup, "frame_time": round(args.frame_time, 9)}
+
+
+def _measure_kw(args, point: tuple) -> dict:
+    cells, size, bounces, spp = point
+    return {"cells": cells, "size": size, "bounces": bounces, "spp": spp, "frames": args.frames,
+            "warmup": args.warmup, "frame_time": args.frame_time}
+
+
+def _print_row(row: dict) -> None:
+    print(f"{row['water_cells']:>10} cells {row['width']}x{row['height']} b{row['bounces']} "
+          f"spp{row['spp']}: {row['fps']:.2f} FPS, {row['frame_wall_ms']:.2f} ms/frame, "
+          f"{row['rays_per_frame']} rays, {row['device_mib']:.1f} MiB", flush=True)
+
+
 def run(args) -> int:
     from app.capture import Progress
     from app.scene import load_scene
-    from kernels import get_runtime
 
     for name, lo in (("frames", 1), ("warmup", 0)):
         if getattr(args, name) < lo:
             raise InputError(f"--{name} {getattr(args, name)} must be >= {lo}")
     if not (math.isfinite(args.frame_time) and 0 <= args.frame_time <= 10):
         raise InputError(f"--frame-time {args.frame_time:g} is out of range; allowed [0, 10]")
+    workers = getattr(args, "workers", None)
+    if workers is not None:
+        from app.cluster import check_workers, import_ray
+
+        check_workers(workers)
+        import_ray()
+    elif getattr(args, "ray_address", None):
+        raise InputError("--ray-address needs --workers N")
     scene = load_scene(args.scene)
     if scene.water is None:
         raise InputError(f"{args.scene}: sweep needs a scene with [water]")
@@ -206,33 +237,52 @@ def run(args) -> int:
     except OSError as exc:
         raise InputError(f"-o {args.out!r}: cannot create the folder ({exc.strerror})") from None
     rows = load_rows(out)
-    rt = get_runtime(args.device)
     points = list(itertools.product(args.cells, args.size, args.bounces or [scene.render.bounces],
                                     args.spp or [scene.render.spp]))
     done = {_key(r) for r in rows}
     bar = Progress(len(points), not args.quiet)
-    skipped = 0
-    for k, (cells, size, bounces, spp) in enumerate(points):
-        key_row = {"scene": str(args.scene), "device": rt.name, "cells": cells,
-                   "width": size[0], "height": size[1], "bounces": bounces, "spp": spp,
-                   "frames": args.frames, "warmup": args.warmup,
-                   "frame_time": round(args.frame_time, 9)}
-        if _key(key_row) in done:
-            skipped += 1
-            bar.update(k + 1, f"skipped {skipped} done")
-            continue
-        row = {**key_row, "date": time.strftime("%Y-%m-%d"),
-               **measure(scene, rt, cells=cells, size=size, bounces=bounces, spp=spp,
-                         frames=args.frames, warmup=args.warmup, frame_time=args.frame_time)}
-        rows.append(row)
-        save_rows(out, rows)
-        bar.update(k + 1)
-        if not bar.enabled and not args.quiet:
-            print(f"{row['water_cells']:>10} cells {size[0]}x{size[1]} b{bounces} spp{spp}: "
-                  f"{row['fps']:.2f} FPS, {row['frame_wall_ms']:.2f} ms/frame, "
-                  f"{row['rays_per_frame']} rays, {row['device_mib']:.1f} MiB", flush=True)
+    if workers is None:
+        from kernels import get_runtime
+
+        rt = get_runtime(args.device)
+        device, skipped = rt.name, 0
+        for k, point in enumerate(points):
+            key_row = _key_row(args, rt.name, point)
+            if _key(key_row) in done:
+                skipped += 1
+                bar.update(k + 1, f"skipped {skipped} done")
+                continue
+            row = {**key_row, "date": time.strftime("%Y-%m-%d"),
+                   **measure(scene, rt, **_measure_kw(args, point))}
+            rows.append(row)
+            save_rows(out, rows)
+            bar.update(k + 1)
+            if not bar.enabled and not args.quiet:
+                _print_row(row)
+    else:
+        from app import cluster
+
+        with cluster.Pool(workers, address=args.ray_address, device=args.device) as pool:
+            names = sorted({i["device"] for i in pool.info.values()})
+            device = names[0]
+            todo = [p for p in points
+                    if not any(_key(_key_row(args, d, p)) in done for d in names)]
+            skipped = len(points) - len(todo)
+            finished = skipped
+            bar.update(finished, f"skipped {skipped} done" if skipped else "")
+            for k, result, dev in cluster.measure_points(
+                    pool, str(Path(args.scene).resolve()),
+                    [_measure_kw(args, p) for p in todo]):
+                row = {**_key_row(args, dev, todo[k]), "date": time.strftime("%Y-%m-%d"),
+                       **result}
+                rows.append(row)
+                save_rows(out, rows)
+                finished += 1
+                bar.update(finished)
+                if not bar.enabled and not args.quiet:
+                    _print_row(row)
     bar.finish()
-    charts(rows, out, rt.name)
+    charts(rows, out, device)
     print(f"sweep: {len(points) - skipped} points measured, {skipped} skipped (already in "
           f"{out / 'sweep.json'}); charts in {out}", file=sys.stderr)
     return 0

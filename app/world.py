@@ -309,13 +309,17 @@ class World:
         seconds = float(seconds)
         if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
             raise InputError(f"frame seconds {seconds:g} is out of range; allowed [0, 3600]")
+        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes)
+        self._drops, self._pushes = [], []
+        return self._enqueue(frame, self.stages)
+
+    def _enqueue(self, frame: Frame, stages) -> int:
+        """Queue ``stages`` of ``frame`` into a free slot (waiting for the oldest if none)."""
         if not self._free:
             self._complete(self._in_flight.popleft(), keep_image=False)
         slot = self._free.popleft()
-        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes)
-        self._drops, self._pushes = [], []
         slot.frame, slot.t0 = frame, time.perf_counter()
-        for stage in self.stages:
+        for stage in stages:
             stage.enqueue(frame, slot)
         self.rt.timer.close_frame(frame.index)
         self._in_flight.append(slot)
@@ -352,6 +356,109 @@ class World:
             i, img = self.read_frame()
             if i == index:
                 return img
+
+    # -- snapshots: one World steps, others render (app.snapshot, app.cluster) ----------------
+    def snapshot_frame(self, seconds: float = 0.0) -> bytes:
+        """Advance one frame as :meth:`enqueue_frame` would (inputs, water, guard and, with
+        caustics on, the scene and the caustic map) but render nothing; return the frame's
+        snapshot (:mod:`app.snapshot`): the surface heights the mesh kernel reads, the scene's
+        transform rows, the camera, the caustic map. :meth:`render_snapshot` on a World of the
+        same scene and settings turns it into the image this World's frame would have shown.
+        Waits for the frame's water (host copies of the heights)."""
+        from app import snapshot
+        from lbm.structs import GUARD_DTYPE
+
+        seconds = float(seconds)
+        if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
+            raise InputError(f"frame seconds {seconds:g} is out of range; allowed [0, 3600]")
+        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes)
+        self._drops, self._pushes = [], []
+        traced = self._caustics is not None and self._caustics.enabled
+        for stage in self.stages:   # the stages that change state; the picture's are skipped
+            if stage.name in ("render", "readback") or (
+                    stage.name in ("scene", "caustics") and not traced):
+                continue
+            stage.enqueue(frame, None)
+        self.rt.timer.close_frame(frame.index)
+        self._next += 1
+        arrays, guard = {}, {"nan": False, "acted": False, "report": "ok"}
+        if self.sim is not None:   # what the readback stage reads, read the same way
+            g = self.rt.to_host(self.sim.guard_buffer, GUARD_DTYPE, 1)[0]
+            guard = self.sim.guard_summary(g, self._guard_prev)
+            self._guard_prev = g.copy()
+            guard["acted"] = guard.get("acted", bool(guard["restored"] or guard["damped"]
+                                                      or guard["clamped"]))
+            arrays["eta"] = self.rt.to_host(self.sim.surface_buffer, np.float32,
+                                            self.sim.n_cells).reshape(self.sim.ny, self.sim.nx)
+        arrays["transforms"] = self.render_scene.scene.read_transforms()
+        if traced:
+            arrays["caustic_map"] = self.rt.to_host(
+                self._caustics.map, np.float32, 4 * self._caustics.n_texels).reshape(-1, 4)
+        return snapshot.encode(frame=frame.index, sim_time=self.sim_time,
+                               lbm_steps=frame.lbm_steps, guard=guard, camera=self.camera,
+                               caustics=self.caustics, arrays=arrays)
+
+    def render_snapshot(self, snap: bytes, *, image: bool = True) -> np.ndarray | None:
+        """Render a snapshot from :meth:`snapshot_frame` of a World of the same scene and
+        settings without stepping: its heights go through the same mesh launch, its transform
+        rows, camera and caustic map are uploaded, then the scene, render and readback stages
+        run. Returns RGBA8 (height, width, 4), byte-identical to the snapshotting World's own
+        frame on the same kind of device. ``image=False`` updates the geometry only: give a
+        fresh World the run's first snapshot so, as in a World's first frame, its water BVH is
+        built over frame 0's surface and later frames refit it. Stats as for :meth:`frame`."""
+        from app import snapshot
+
+        s = snapshot.decode(snap)
+        self._apply_snapshot(s)
+        frame = Frame(self._next, 0.0, lbm_steps=s.lbm_steps, sim_time_end=s.sim_time)
+        if not image:
+            self._update_scene_only(frame)
+            return None
+        index = self._enqueue(frame, [st for st in self.stages
+                                      if st.name in ("scene", "render", "readback")])
+        while True:
+            i, img = self.read_frame()
+            if i == index:
+                return img
+
+    def _update_scene_only(self, frame: Frame) -> None:
+        """The scene stage alone (BVHs and TLAS over the uploaded state); counts as a frame."""
+        for st in self.stages:
+            if st.name == "scene":
+                st.enqueue(frame, None)
+        self._next += 1
+
+    def _apply_snapshot(self, s) -> None:
+        """Upload a decoded snapshot's state (heights -> mesh, transforms, camera, caustics)."""
+        from app.snapshot import SnapshotError
+
+        a, rs = s.arrays, self.render_scene
+        rows = a.get("transforms")
+        n = rs.scene.n_instances
+        if rows is None or rows.shape != (n, 3, 4) or rows.dtype != np.float32:
+            raise SnapshotError(f"snapshot of another scene: transforms "
+                                f"{None if rows is None else rows.shape}, this one has {n} "
+                                "instances")
+        eta = a.get("eta")
+        if (eta is None) != (self.sim is None) or (
+                eta is not None and eta.shape != (self.sim.ny, self.sim.nx)):
+            raise SnapshotError(f"snapshot of another scene: heights "
+                                f"{None if eta is None else eta.shape}, this water "
+                                f"{None if self.sim is None else (self.sim.ny, self.sim.nx)}")
+        q = self.rt.queue
+        if eta is not None:
+            w = self.water
+            self.sim.write_surface_heights(eta, w.vertices, w.normals, w.origin)
+        cl.enqueue_copy(q, rs.transform_buffer, rows, is_blocking=False)
+        self.set_camera(*s.camera)
+        if s.caustics != self.caustics:
+            self.set_caustics(s.caustics)
+        if "caustic_map" in a:
+            m = a["caustic_map"]
+            if self._caustics is None or m.size != 4 * self._caustics.n_texels:
+                raise SnapshotError(f"snapshot of another scene: caustic map of {m.size // 4} "
+                                    "texels")
+            cl.enqueue_copy(q, self._caustics.map, m, is_blocking=False)
 
     def drain(self) -> None:
         """Complete every frame in flight (their stats become available)."""

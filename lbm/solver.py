@@ -580,6 +580,39 @@ class ShallowWater:
         (i, j) at index j*nx + i, position (ox + (i+1/2) dx, oy + bed + h, oz + (j+1/2) dx, 0)
         in metres with Y up; unit normals from central differences of bed + h. No host copy.
         Triangles: :func:`lbm.grid_triangles`. Returns the event of the last launch."""
+        origin4 = self._check_surface_args(vertices_buf, normals_buf, origin)
+        if self._eta is None:
+            self._eta = self.rt.buffer(4 * self.n_cells)
+        self._k_height.bind(f=self._f.current, bed=self._bed, p=self._params, eta=self._eta)
+        self._k_height.launch(self.n_cells, 256 if self.rt.is_gpu else None)
+        return self._enqueue_mesh(vertices_buf, normals_buf, origin4)
+
+    @property
+    def surface_buffer(self) -> cl.Buffer | None:
+        """The surface heights bed + h (nx*ny float32, m, index j*nx + i) as the last
+        :meth:`write_surface` computed them: exactly what its mesh launch turned into vertices
+        (None before the first call). Read-only for other stages."""
+        return self._eta
+
+    def write_surface_heights(self, eta, vertices_buf: cl.Buffer,
+                              normals_buf: cl.Buffer | None = None,
+                              origin=(0.0, 0.0, 0.0)) -> cl.Event:
+        """:meth:`write_surface` from given surface heights ``eta`` (nx*ny float32, m, as
+        :attr:`surface_buffer` held them) instead of the populations: the same mesh launch, so
+        the same heights give the same vertex and normal bytes. For rendering a recorded
+        surface (a snapshot) on another device; the water itself is not touched."""
+        origin4 = self._check_surface_args(vertices_buf, normals_buf, origin)
+        eta = np.asarray(eta)
+        if eta.dtype != np.float32 or eta.size != self.n_cells:
+            raise ValueError(f"write_surface_heights: eta must hold nx*ny = {self.n_cells} "
+                             f"float32 values, got {eta.size} {eta.dtype}")
+        if self._eta is None:
+            self._eta = self.rt.buffer(4 * self.n_cells)
+        cl.enqueue_copy(self.rt.queue, self._eta, np.ascontiguousarray(eta).ravel(),
+                        is_blocking=False)
+        return self._enqueue_mesh(vertices_buf, normals_buf, origin4)
+
+    def _check_surface_args(self, vertices_buf, normals_buf, origin) -> np.ndarray:
         need = 16 * self.n_cells
         for name, buf in (("vertices_buf", vertices_buf), ("normals_buf", normals_buf)):
             if buf is None and name == "normals_buf":
@@ -596,16 +629,14 @@ class ShallowWater:
             raise ValueError(f"write_surface: origin={origin!r} must be three numbers") from None
         if o.shape != (3,) or not np.all(np.isfinite(o)):
             raise ValueError(f"write_surface: origin={origin!r} must be three finite numbers")
-        if self._eta is None:
-            self._eta = self.rt.buffer(4 * self.n_cells)
-        rt = self.rt
-        self._k_height.bind(f=self._f.current, bed=self._bed, p=self._params, eta=self._eta)
-        self._k_height.launch(self.n_cells, 256 if rt.is_gpu else None)
-        origin4 = np.array([o[0], o[1], o[2], 0.0], np.float32)
+        return np.array([o[0], o[1], o[2], 0.0], np.float32)
+
+    def _enqueue_mesh(self, vertices_buf, normals_buf, origin4) -> cl.Event:
+        """Vertices (and normals) from :attr:`surface_buffer`: the mesh launch."""
         self._k_mesh.bind(eta=self._eta, p=self._params, origin=origin4, vertices=vertices_buf,
                           normals=normals_buf if normals_buf is not None else vertices_buf,
                           write_normals=int(normals_buf is not None))
-        return self._k_mesh.launch((self.nx, self.ny), (64, 1) if rt.is_gpu else None)
+        return self._k_mesh.launch((self.nx, self.ny), (64, 1) if self.rt.is_gpu else None)
 
     def fields(self) -> dict[str, np.ndarray]:
         """Depth ``h`` (m), velocity ``u``, ``v`` (m/s) and ``bed`` (m) as float32 (ny, nx)
