@@ -103,7 +103,7 @@ def run(args) -> int:
         row = {"device": world.device_name, "gl_renderer": ctx.info["GL_RENDERER"],
                "date": time.strftime("%Y-%m-%d"), "width": w, "height": h,
                "cells": f"{cells[0]}x{cells[1]}" if cells else "",
-               "upload": args.upload, "display_path": display_path(rt),
+               "upload": args.upload, "display_path": display_path(rt, args.upload),
                "bare_frame_ms": round(bare_ms, 3), "window_frame_ms": round(loop_ms, 3),
                "ratio": round(loop_ms / bare_ms, 3),
                "upload_draw_ms": round(_median_ms(upload), 3),

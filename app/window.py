@@ -122,13 +122,13 @@ def make_world(scene, device, *, size, spp, bounces, cells):
                  cells=None if scene.water is None else cells)
 
 
-def display_path(rt) -> str:
+def display_path(rt, upload: str = "pbo") -> str:
     """Which display path is used and why, for the HUD and the start line."""
-    exts = rt.device.extensions.split()
-    if "cl_khr_gl_sharing" in exts:
-        return ("copy (2 in flight, pixel-buffer upload); cl_khr_gl_sharing present but the "
+    how = "pixel-buffer" if upload == "pbo" else "direct"
+    if "cl_khr_gl_sharing" in rt.device.extensions.split():
+        return (f"copy (2 in flight, {how} upload); cl_khr_gl_sharing present but the "
                 "shared path is not implemented")
-    return "copy (2 in flight, pixel-buffer upload); no cl_khr_gl_sharing on this device"
+    return f"copy (2 in flight, {how} upload); no cl_khr_gl_sharing on this device"
 
 
 def water_of(scene, cells: int | None) -> Water | None:
@@ -210,6 +210,9 @@ class EventLog:
                 if rec.get("kind") != "header" or rec.get("version") != EVENTS_VERSION:
                     raise InputError(f"{path}:{n}: the first line must be the header "
                                      f"{{\"kind\": \"header\", \"version\": {EVENTS_VERSION}}}")
+                bad = [k for k in ("window", "cells", "scale", "bounces") if k not in rec]
+                if bad:
+                    raise InputError(f"{path}:{n}: the header lacks {', '.join(bad)}")
                 header = rec
                 continue
             kind = rec.get("kind")
@@ -441,7 +444,7 @@ class Viewer:
                                  water_of(scene, self.cells), spp=spp, bounces=bounces,
                                  cells=self.cells, window_size=logical, image_size=image,
                                  frame_time=frame_time or 1 / 60)
-        self.path = display_path(rt)
+        self.path = display_path(rt, upload)
         self.world = make_world(scene, rt, size=image, spp=spp, bounces=bounces,
                                 cells=self.cells)
         self.controls.reapply(self.world, camera=False)
@@ -739,7 +742,8 @@ def run(args) -> int:
     else:
         quality = decide_quality(args, scene, rt, window_size, frame_seconds)
         spp = args.spp or (scene.render.spp if scene.render.spp in (1, 2, 4) else 1)
-    print(f"lbwater window: {rt.name}; {quality.describe()}; display {display_path(rt)}",
+    print(f"lbwater window: {rt.name}; {quality.describe()}; display "
+          f"{display_path(rt, args.upload)}",
           flush=True)
     viewer = Viewer(scene, rt, window_size=window_size, quality=quality, spp=spp,
                     frame_time=args.frame_time, vsync=not args.no_vsync, upload=args.upload,
