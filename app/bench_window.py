@@ -6,7 +6,8 @@ Per image size: the bare frame (World.frame: water, BVH, render, RGBA8 read-back
 upload it to a texture through a pixel buffer, draw the quad into a framebuffer of that size,
 glFinish), and the upload + draw alone. The goal (issue 11): the window's loop <= 1.1x the bare
 frame. Every size is checked in the same run: the drawn framebuffer must equal the frame's image
-exactly, else the run fails.
+exactly, else the run fails. Each row names the GL renderer: where EGL lists several devices
+(a GPU and Mesa's llvmpipe), ``GLCONTEXT_DEVICE_INDEX=N`` picks another one.
 """
 
 from __future__ import annotations
