@@ -45,6 +45,7 @@ class Assembly:
     sim: object | None              #: lbm.ShallowWater or None (no [water])
     water: WaterSurface | None
     instances: dict                 #: instance id -> what it is ("water", "pool", mesh file)
+    caustic_box: object | None = None  #: raytrace.caustics.PoolBox (a pool with water) or None
 
 
 def resized_water(water: WaterSpec, cells: int) -> WaterSpec:
@@ -209,7 +210,41 @@ def assemble(scene: Scene, rt, *, cells: int | None = None, water_steps: int | N
     if not b.rs.meshes:
         raise InputError(f"{scene.path}: the scene has nothing to render (no [[meshes]], no "
                          "[water])")
-    return Assembly(b.rs, sim, surface, b.instances)
+    return Assembly(b.rs, sim, surface, b.instances, caustic_box(scene, water, b.instances))
+
+
+def caustic_box(scene: Scene, water: WaterSpec | None, instances: dict):
+    """The pool's floor and walls as the caustics' receiver (app.assets.pool_meshes's box), the
+    water's rectangle and rest level; None without [water] and [pool]."""
+    from raytrace.caustics import PoolBox
+
+    if water is None or scene.pool is None:
+        return None
+    pool = next(i for i, what in instances.items() if what == "pool")
+    ox, oy, oz = water.origin
+    sx, sz = water.size
+    h = water.dx / 2
+    lo = (ox + h, oy, oz + h)
+    hi = (ox + sx - h, oy + scene.pool.wall_height, oz + sz - h)
+    return PoolBox(lo, hi, (lo[0], lo[2], hi[0], hi[2]), oy + water.depth, pool)
+
+
+def caustic_settings(scene: Scene, mode: str | None = None):
+    """``[shading] caustics*`` as :class:`raytrace.caustics.CausticSettings` (``mode``
+    overrides), validated; a one-line InputError naming the scene file."""
+    from raytrace.caustics import CausticSettings
+
+    sh = scene.shading
+    kw = {} if sh is None else {
+        "mode": sh.caustics, "photons": sh.caustic_photons,
+        "resolution": sh.caustic_resolution, "filter": sh.caustic_filter,
+        "blend": sh.caustic_blend}
+    if mode is not None:
+        kw["mode"] = mode
+    try:
+        return CausticSettings(**kw).resolved()
+    except InputError as exc:
+        raise InputError(f"{scene.path}: [shading] {exc}") from None
 
 
 def render_settings(scene: Scene, *, width=None, height=None, spp=None, bounces=None,

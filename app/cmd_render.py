@@ -25,6 +25,8 @@ def add_arguments(p) -> None:
     p.add_argument("--spp", type=int, help="samples per pixel")
     p.add_argument("--bounces", type=int, help="maximum reflection/refraction depth")
     p.add_argument("--device", help="OpenCL device: gpu, cpu, pocl, P:D or part of a name")
+    p.add_argument("--caustics", choices=("off", "traced", "projected"),
+                   help="caustics under the water; default from [shading] caustics")
     p.add_argument("--aov", help="also write primary depth, normal, prim and instance ids (.npz)")
 
 
@@ -53,7 +55,8 @@ def run(args) -> int:
     scene = load_scene(args.scene)
     t0 = time.perf_counter()
     world = World(scene, args.device, width=args.width, height=args.height, spp=args.spp,
-                  bounces=args.bounces, aov=args.aov is not None)
+                  bounces=args.bounces, aov=args.aov is not None,
+                  caustics=getattr(args, "caustics", None))
     img = world.frame()
     elapsed = time.perf_counter() - t0
     if not np.isfinite(world.read_radiance()).all():

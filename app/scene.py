@@ -206,6 +206,16 @@ SHADING_SCHEMA = {
                               doc="secondary rays below this share of a pixel are cut"),
     "ambient": Field("vec3", (0.05, 0.05, 0.05), lo=0.0, hi=1e3, doc="ambient light, rgb"),
     "seed": Field("int", 0, lo=0, hi=2**32 - 1, doc="jitter seed"),
+    "caustics": Field("str", "off", choices=("off", "traced", "projected"),
+                      doc="sunlight through the water onto the pool: off (shadow rays through "
+                          "the water), traced (photons); projected is not implemented"),
+    "caustic_photons": Field("int", 262144, lo=1, hi=2**26,
+                             doc="photons per frame per directional light, over the water"),
+    "caustic_resolution": Field("int", 256, lo=2, hi=8192,
+                                doc="caustic map texels along the pool floor's longer side"),
+    "caustic_filter": Field("int", 1, lo=0, hi=16, doc="tent filter radius (texels)"),
+    "caustic_blend": Field("float", 0.5, lo=0.0, hi=0.99,
+                           doc="weight of the last frame's caustic map (temporal smoothing)"),
 }
 
 SKY_SCHEMA = {
@@ -284,6 +294,11 @@ class ShadingSpec:
     min_contribution: float
     ambient: tuple
     seed: int
+    caustics: str = "off"
+    caustic_photons: int = 262144
+    caustic_resolution: int = 256
+    caustic_filter: int = 1
+    caustic_blend: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -363,6 +378,7 @@ class Scene:
     materials: dict[str, MaterialSpec] = field(default_factory=dict)
     meshes: tuple[MeshSpec, ...] = ()
     pool: PoolSpec | None = None
+    timeline: tuple = ()   # [[timeline]] events sorted by time (app.timeline)
 
 
 def _shading(value, src: SourceText, base: Path) -> ShadingSpec:
@@ -465,3 +481,13 @@ def check_material_names(scene: Scene) -> None:
                              f"{', '.join(sorted(known)) or 'none'}")
     if pool is not None and scene.water is None:
         raise InputError(f"{where}: [pool] needs a [water] section (the pool's size and depth)")
+
+
+# ---- [[timeline]]: scripted drops, rain, pushes and camera keys (app.timeline) -------------------
+def _timeline(value, src: SourceText, base: Path) -> tuple:
+    from app.timeline import parse_timeline
+
+    return parse_timeline(value, src, base)
+
+
+SECTIONS["timeline"] = _timeline

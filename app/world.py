@@ -9,6 +9,8 @@ A frame is an ordered list of stages, each only enqueuing device work (no host s
     water       LBM steps for the frame's simulated time (the remainder of seconds/dt is
                 carried to the next frame), then the surface into the water mesh's buffers
     scene       water BLAS refit (or rebuild), TLAS over the scene's device transform buffer
+    caustics    photons through the water into the pool's caustic map (raytrace.caustics;
+                only with ``[shading] caustics = "traced"`` or ``set_caustics("traced")``)
     render      the wavefront Whitted frame, tonemapped to RGBA8 on the device
     readback    non-blocking copies of the RGBA8 image, the guard record and the ray counts
                 into this frame's slot of host arrays
@@ -117,13 +119,14 @@ class World:
     ``spp``, ``bounces`` override ``[render]``; ``cells`` resizes the water grid (cells along
     its longer side); ``water_steps`` overrides ``[pool] steps`` (LBM steps before the first
     frame); ``seed`` overrides ``[shading] seed``; ``rebuild_water_bvh`` rebuilds the water BVH
-    each frame instead of refitting it.
+    each frame instead of refitting it; ``caustics`` (off | traced) overrides ``[shading]
+    caustics``.
     """
 
     def __init__(self, scene, device=None, *, width=None, height=None, spp=None, bounces=None,
                  aov=False, water_steps=None, cells=None, rebuild_water_bvh=False,
-                 seed=None, frames_in_flight: int = 2):
-        from app.assemble import assemble, render_settings
+                 seed=None, frames_in_flight: int = 2, caustics=None):
+        from app.assemble import assemble, caustic_settings, render_settings
         from app.scene import Scene, load_scene
         from kernels import get_runtime
         from raytrace.render import Renderer
@@ -144,6 +147,9 @@ class World:
         self.rebuild_water_bvh = bool(rebuild_water_bvh)
         self.renderer = Renderer(self.rt, self.render_scene, render_settings(
             scene, width=width, height=height, spp=spp, bounces=bounces, aov=aov, seed=seed))
+        self._caustic_box = a.caustic_box
+        self._caustics = None           # raytrace.caustics.Caustics, made when first turned on
+        self.set_caustics(caustic_settings(scene, caustics).mode)
         c = scene.camera
         self.set_camera(c.eye, c.target, c.up, c.fov)
         self._rain = scene.water.rain if scene.water is not None else None
@@ -172,8 +178,8 @@ class World:
         self._guard_prev = None
         if self.sim is not None:
             self._guard_prev = self.sim.guard_record()
-        self.stages = [_Inputs(self), _Water(self), _SceneUpdate(self), _Render(self),
-                       _Readback(self)]
+        self.stages = [_Inputs(self), _Water(self), _SceneUpdate(self), _Caustics(self),
+                       _Render(self), _Readback(self)]
         self.rt.finish()
         self.rt.timer.reset()
 
@@ -229,6 +235,32 @@ class World:
         except ValueError as exc:
             raise InputError(str(exc)) from None
         self.rain_rate = rate
+
+    def set_caustics(self, mode: str) -> None:
+        """Caustics for the next frames: ``off`` (shadow rays through the water) or ``traced``
+        (photons into a caustic map over the pool; the window's C key toggles). The other
+        ``[shading] caustic_*`` settings stay the scene's."""
+        from app.assemble import caustic_settings
+
+        mode = caustic_settings(self.scene, mode).mode
+        if mode == "off":
+            if self._caustics is not None:
+                self._caustics.set_mode("off")
+            self.renderer.set_caustics(None)
+            self.caustics = mode
+            return
+        if self._caustic_box is None:
+            raise InputError(f"caustics {mode!r}: the scene has no pool ([water] and [pool])")
+        if self._caustics is None:
+            from raytrace.caustics import Caustics
+
+            rs = self.renderer.settings
+            self._caustics = Caustics(self.rt, self.render_scene, self._caustic_box,
+                                      caustic_settings(self.scene, mode), fresnel=rs.fresnel,
+                                      seed=rs.seed)
+        self._caustics.set_mode(mode)
+        self.renderer.set_caustics(self._caustics.map, self._caustics.view_params())
+        self.caustics = mode
 
     # -- facts ------------------------------------------------------------------------------
     @property
@@ -299,6 +331,8 @@ class World:
         for stage in self.stages:
             if stage.name in ("inputs", "water"):
                 stage.enqueue(frame, None)
+        if self._caustics is not None:  # the next map starts afresh (no blend over the gap)
+            self._caustics.reset_history()
         self._next += 1
 
     def read_frame(self) -> tuple[int, np.ndarray]:
@@ -359,10 +393,12 @@ class World:
     def _device_bytes(self) -> int:
         """Bytes of the device buffers the frame's objects hold (walked once, then cached until
         the scene reallocates)."""
-        key = (id(self.render_scene.scene.trace_args()[0]), self.render_scene.n_triangles)
+        key = (id(self.render_scene.scene.trace_args()[0]), self.render_scene.n_triangles,
+               id(self._caustics))
         if getattr(self, "_bytes_key", None) != key:
             self._bytes_key = key
-            self._bytes = buffer_bytes(self.renderer, self.render_scene, self.sim)
+            self._bytes = buffer_bytes(self.renderer, self.render_scene, self.sim,
+                                       self._caustics)
         return self._bytes
 
     # -- queries (each synchronises) ---------------------------------------------------------
@@ -487,6 +523,21 @@ class _SceneUpdate:
 
     def enqueue(self, frame: Frame, slot: _Slot) -> None:
         self.world.render_scene.update(rebuild=self.world.rebuild_water_bvh)
+
+
+class _Caustics:
+    """The caustic map of the frame's water (raytrace.caustics): after the scene stage, whose
+    BVH its photons trace; nothing when caustics are off."""
+
+    name = "caustics"
+
+    def __init__(self, world: World):
+        self.world = world
+
+    def enqueue(self, frame: Frame, slot: _Slot) -> None:
+        c = self.world._caustics
+        if c is not None and c.enabled:
+            c.enqueue(frame.index)
 
 
 class _Render:

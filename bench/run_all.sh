@@ -15,6 +15,9 @@ run python3 -m app.cli devices --json
 run python3 -m app.cli bench lbm "${d[@]}" --sizes 256,512,1024,2048,4096 --steps 100 --repeats 5 \
     --out "$out/lbm"
 run python3 -m app.cli bench bvh "${d[@]}" --out "$out/bvh"
+run python3 bench/ab_radix_bits.py "${d[@]}"
+run python3 bench/ab_embree_interleaved.py "${d[@]}"
+run python3 bench/lattice_stability.py "${d[@]}" --out "$out/lattice_stability.csv"
 run python3 -m app.cli bench render "${d[@]}" --check-device cpu --out "$out/render"
 run python3 -m app.cli bench frame "${d[@]}" --cells 256 512 1024 2048 --out "$out/frame"
 run python3 -m app.cli bench frame "${d[@]}" --cells 1024 --rebuild --out "$out/frame_rebuild"

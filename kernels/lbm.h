@@ -28,14 +28,36 @@
 #define LBM_SAVE_IF_CLEAN 1
 #define LBM_SAVE_FORCE 2
 
-/* Damping by the guard (more viscosity, tau - 1/2 larger), never above LBM_TAU_RAISE_MAX:
- * after a restore tau - 1/2 at least doubles (and is at least LBM_TAU_RAISE_MIN); after an
- * interval with clamps it grows by half (and by at least LBM_TAU_STEP_MIN); each clean check
- * moves tau back towards tau_user by the factor LBM_TAU_DECAY. */
-#define LBM_TAU_RAISE_MIN 0.05f
-#define LBM_TAU_STEP_MIN 0.01f
-#define LBM_TAU_RAISE_MAX 1.0f
-#define LBM_TAU_DECAY 0.98f
+/* Local damping by the guard (never a global change of tau): a cell the limiter clipped is
+ * marked LBM_DAMP_STEPS in the uchar damping mark; every step a mark decays by one and spreads
+ * to the 8 neighbours as (mark - LBM_DAMP_SPREAD), so the clipped cell and its neighbours relax
+ * with tau = max(tau, LBM_TAU_DAMPED) for a few steps. Cells found non-finite (restored from the
+ * checkpoint) are marked LBM_DAMP_NAN_STEPS, a longer and wider damping. */
+#define LBM_DAMP_STEPS 8
+#define LBM_DAMP_SPREAD 4
+#define LBM_DAMP_NAN_STEPS 32
+#define LBM_TAU_DAMPED 1.0f
+
+/* Storage of the populations (a build define, LBM_FP16S): 0 float32; 1 IEEE float16 holding the
+ * deviation f_a - rest_a from the lake at rest at the reference depth (FluidX3D's FP16S idea:
+ * half storage, float32 arithmetic). The buffers are typed LBM_FT; every access goes through
+ * lbm_load / lbm_store. */
+#ifndef LBM_FP16S
+#define LBM_FP16S 0
+#endif
+#if LBM_FP16S
+#define LBM_FT half
+#define LBM_RAW ushort
+#else
+#define LBM_FT float
+#define LBM_RAW uint
+#endif
+
+/* Guard modes (a build define, LBM_GUARD): 1 limiter + local damping + NaN restore; 0 the plain
+ * solver (NaN counted and reported only; no limiting, no restore). */
+#ifndef LBM_GUARD
+#define LBM_GUARD 1
+#endif
 
 /* Work-group size of the two-stage reduction (a power of two). */
 #define LBM_REDUCE_WG 256
@@ -48,7 +70,7 @@
  * limiter caps G h here and the lattice is designed for G h <= 0.5 (lbm/lattice.py). */
 #define LBM_GH_LIMIT 0.6f
 
-/* 40 bytes: the constants of one solver, passed by value to every lbm kernel. */
+/* 56 bytes: the constants of one solver, passed by value to every lbm kernel. */
 typedef struct {
     int nx, ny;       /* cells along x (i) and y (j) */
     int n_cells;      /* nx * ny: the stride between direction planes of f */
@@ -59,13 +81,18 @@ typedef struct {
     float h_min;      /* limiter: depth floor, m */
     float u2_max;     /* limiter: largest (|u|/e)^2 */
     float fr2_max;    /* limiter: largest Froude number squared */
+    float rest0;      /* LBM_FP16S: stored f_a = f_a - rest_a; rest of direction 0, m */
+    float rest_axis;  /* ... of the axes (1, 3, 5, 7), m */
+    float rest_diag;  /* ... of the diagonals (2, 4, 6, 8), m; all 0 for float32 storage */
+    float pad0;
 } LbmParams;
 
-/* 80 bytes: the guard's device-side record (one per solver). The step kernels read tau and
- * count clamps; the reduction fills the statistics and decides the action; the host reads the
- * whole record once per frame. Counters are cumulative. */
+/* 112 bytes: the guard's device-side record (one per solver). The step kernels count and
+ * account what the limiter did; the reduction fills the statistics and decides the action; the
+ * host reads the whole record once per frame. Counters and volumes are cumulative; volumes are
+ * sums of depth over cells in m (x dx^2 = m^3). */
 typedef struct {
-    float tau;             /* effective relaxation time (>= tau_user; raised after a restore) */
+    float tau;             /* relaxation time (tau_user; the guard never changes it globally) */
     float tau_user;        /* relaxation time from the viscosity */
     float mass;            /* sum of h over cells at the last check, m (x dx^2 = volume) */
     float max_u2;          /* max (|u|/e)^2 at the last check */
@@ -75,31 +102,41 @@ typedef struct {
     float ckpt_max_u2;
     float ckpt_max_fr2;
     float ckpt_min_h;
+    float mass0;           /* sum of h at the first check after set_state, m */
+    float sources;         /* depth asked for by drops (sum over cells), m */
+    float clipped;         /* depth removed by the limiter (and by restores), m */
+    float created;         /* depth added by the limiter (and by restores), m */
+    float peak_fr2;        /* largest Froude^2 the limiter saw before clipping, over the run of
+                              intervals with clips that ended at the last check (0 if clean) */
+    float peak_acc;        /* the same, accumulated by the steps since the last check */
     uint nan_cells;        /* non-finite cells found at the last check (before any restore) */
     uint action;           /* LBM_GUARD_*: what lbm_guard_apply does next */
     uint clamped;          /* cells clamped by the limiter or a source */
     uint clamped_checked;  /* value of clamped at the last check */
     uint restored;         /* checkpoint restores */
-    uint damped;           /* tau raises */
+    uint damped;           /* checks whose interval had locally damped cells */
     uint saved;            /* checkpoints saved */
     uint checks;           /* checks run */
+    uint damped_cells;     /* cells with a damping mark at the last check */
     uint pad0, pad1;
 } LbmGuard;
 
 /* 32 bytes: one work-group's partial reduction. */
 typedef struct {
     float mass, max_u2, max_fr2, min_h;
-    uint nan_cells;
-    uint pad0, pad1, pad2;
+    uint nan_cells, damped_cells;
+    uint pad0, pad1;
 } LbmPartial;
 
-/* 32 bytes: a drop or a push, applied over the cell box [i0, i0+w) x [j0, j0+h) (the launch). */
+/* 48 bytes: a drop or a push, applied over the cell box [i0, i0+w) x [j0, j0+h) (the launch). */
 typedef struct {
     float x, y;         /* drop centre or drag start, m */
     float dx, dy;       /* drag vector, m (push only) */
     float radius;       /* m */
     float amount;       /* drop: height, m; push: velocity change at the centre line, m/s */
     int i0, j0;         /* first cell of the launch box */
+    float volume;       /* depth asked for (sum over the box's cells), m: the budget's source */
+    float pad0, pad1, pad2;
 } LbmSource;
 
 /* Weights w_a of the LABSWE equilibrium: 1/3 on the axes, 1/12 on the diagonals. */
@@ -169,6 +206,48 @@ int lbm_limit(float* h, float* ux, float* uy, const LbmParams p)
     *ux = vx;
     *uy = vy;
     return hit;
+}
+
+/* Stored population a of cell n, as float32. */
+float lbm_rest(const int a, const LbmParams p)
+{
+    return a == 0 ? p.rest0 : ((a & 1) ? p.rest_axis : p.rest_diag);
+}
+
+float lbm_load(__global const LBM_FT* f, const int a, const int n, const LbmParams p)
+{
+#if LBM_FP16S
+    return vload_half(a * p.n_cells + n, f) + lbm_rest(a, p);
+#else
+    return f[a * p.n_cells + n];
+#endif
+}
+
+void lbm_store(__global LBM_FT* f, const int a, const int n, const LbmParams p, const float v)
+{
+#if LBM_FP16S
+    vstore_half_rte(v - lbm_rest(a, p), a * p.n_cells + n, f);
+#else
+    f[a * p.n_cells + n] = v;
+#endif
+}
+
+/* *addr += v for a float in global memory (OpenCL 1.2 has no float atomics): a compare-exchange
+ * loop, used only where the limiter acted (rare). */
+void lbm_atomic_add(volatile __global float* addr, const float v)
+{
+    union { uint u; float f; } old, new_;
+    do {
+        old.f = *addr;
+        new_.f = old.f + v;
+    } while (atomic_cmpxchg((volatile __global uint*)addr, old.u, new_.u) != old.u);
+}
+
+/* The limiter's volume account: depth dh added (> 0) or removed (< 0) in one cell. */
+void lbm_account(__global LbmGuard* g, const float dh)
+{
+    if (dh > 0.0f) lbm_atomic_add(&g->created, dh);
+    else if (dh < 0.0f) lbm_atomic_add(&g->clipped, -dh);
 }
 
 /* Index of cell (i, j). */

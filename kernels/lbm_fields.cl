@@ -4,13 +4,13 @@
  */
 #include "lbm.h"
 
-__kernel void lbm_fields(__global const float* restrict f, const LbmParams p,
+__kernel void lbm_fields(__global const LBM_FT* restrict f, const LbmParams p,
                          __global float* h_out, __global float* u_out, __global float* v_out)
 {
     const int n = get_global_id(0);
     if (n >= p.n_cells) return;
     float fl[9], h, mx, my;
-    for (int a = 0; a < 9; ++a) fl[a] = f[a * p.n_cells + n];
+    for (int a = 0; a < 9; ++a) fl[a] = lbm_load(f, a, n, p);
     lbm_moments(fl, &h, &mx, &my);
     h_out[n] = h;
     u_out[n] = p.e * mx / h;

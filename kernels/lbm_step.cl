@@ -3,10 +3,12 @@
  * last step at their origin cells), writes f_dst. Launch: 2D over (nx, ny).
  *
  * Defines: LBM_BOUNDARY (LBM_SLIP | LBM_NOSLIP), LBM_BED (0: flat bed, the bed force and the depth
- * buffers are skipped; 1: uneven bed).
+ * buffers are skipped; 1: uneven bed, or a floating hull's pressure head added to the bed),
+ * LBM_GUARD (1: limiter and local damping marks; 0: the plain scheme), LBM_FP16S (storage).
  *
- * Memory per cell and step: 9 float loads + 9 float stores (72 B); with LBM_BED also the depth
- * at t and the bed (8 B, neighbours come from cache) and the new depth (4 B): 84 B.
+ * Memory per cell and step: 9 float loads + 9 float stores (72 B; 36 B with LBM_FP16S); with
+ * LBM_BED also the depth at t and the bed (8 B, neighbours come from cache) and the new depth
+ * (4 B): 84 B; with LBM_GUARD the damping mark (1 B read, neighbours from cache, 1 B written).
  */
 #include "lbm.h"
 
@@ -22,7 +24,7 @@
  * negated, my: cy negated), noslip reverses it (opp). The bed force of the link, split with the
  * equilibrium weight w, makes a lake at rest an exact fixed point (REFERENCES.md sec. 1):
  *   F_a = -w_a G (h(x) + h(src)) / 2 (z(x) - z(src)),  zero for bounce-back (src = x). */
-float lbm_pull(__global const float* restrict f, __global const float* restrict h_src,
+float lbm_pull(__global const LBM_FT* restrict f, __global const float* restrict h_src,
                __global const float* restrict bed, const LbmParams p, const int i, const int j,
                const int a, const int cx, const int cy, const int mx, const int my,
                const int opp, const float w, const float h_here, const float z_here)
@@ -50,7 +52,7 @@ float lbm_pull(__global const float* restrict f, __global const float* restrict 
     }
 #endif
     const int s = LBM_CELL(p, si, sj);
-    float fa = f[m * p.n_cells + s];
+    float fa = lbm_load(f, m, s, p);
 #if LBM_BED
     fa -= w * p.g_lat * 0.5f * (h_here + h_src[s]) * (z_here - bed[s]);
 #else
@@ -63,23 +65,35 @@ float lbm_pull(__global const float* restrict f, __global const float* restrict 
     return fa;
 }
 
-/* Collision of nine streamed populations in place; returns the depth after the limiter and sets
- * *clamped when the limiter acted (the cell is then set to its equilibrium, a local damping).
+/* Collision of nine streamed populations in place with relaxation rate omega; returns the
+ * depth after the limiter. With LBM_GUARD, a cell beyond the limits is set to the equilibrium of
+ * its limited moments (*clamped = 1, *dh the depth the limiter added, *fr2 its Froude^2 before).
  * Delta form: each moving population gets d_a = omega (feq_a - f_a) + drag_a and the rest
  * population -sum d_a, so the float32 rounding of the collision adds no mass on average and a
  * state at its equilibrium is an exact fixed point. */
-float lbm_collide(float* f, const LbmParams p, const float omega, int* clamped)
+float lbm_collide(float* f, const LbmParams p, const float omega, int* clamped, float* dh,
+                  float* fr2)
 {
     float h, mx, my;
     lbm_moments(f, &h, &mx, &my);
     float ux = mx / h, uy = my / h;
     float feq[9];
+#if LBM_GUARD
+    const float h0 = h;
     if (lbm_limit(&h, &ux, &uy, p)) {
         *clamped = 1;
+        *dh = h - h0;
+        const float u2 = (mx * mx + my * my) / (h0 * h0);
+        *fr2 = h0 > 0.0f ? u2 / (p.g_lat * h0) : 0.0f;  /* no Froude without depth */
         lbm_equilibrium(h, ux, uy, p.g_lat, feq);
         for (int a = 0; a < 9; ++a) f[a] = feq[a];
         return h;
     }
+#else
+    (void)clamped;
+    (void)dh;
+    (void)fr2;
+#endif
     lbm_equilibrium(h, ux, uy, p.g_lat, feq);
     /* Linear drag: momentum change dM = -drag * (mx, my), split as w_a c_a.dM (sum = dM). */
     const float dmx = -p.drag * mx, dmy = -p.drag * my;
@@ -97,10 +111,29 @@ float lbm_collide(float* f, const LbmParams p, const float omega, int* clamped)
     return h;
 }
 
-__kernel void lbm_step(__global const float* restrict f_src, __global float* restrict f_dst,
+/* The damping mark of cell (i, j) after this step: a clipped cell gets LBM_DAMP_STEPS; others
+ * keep the larger of their own mark - 1 and the largest neighbour's - LBM_DAMP_SPREAD. */
+int lbm_mark_spread(__global const uchar* restrict mark, const LbmParams p, const int i,
+                    const int j, const int own)
+{
+    int nb = 0;
+    for (int dj = -1; dj <= 1; ++dj) {
+        const int jj = j + dj;
+        if (jj < 0 || jj >= p.ny) continue;
+        for (int di = -1; di <= 1; ++di) {
+            const int ii = i + di;
+            if (ii < 0 || ii >= p.nx || (di == 0 && dj == 0)) continue;
+            nb = max(nb, (int)mark[LBM_CELL(p, ii, jj)]);
+        }
+    }
+    return max(0, max(own - 1, nb - LBM_DAMP_SPREAD));
+}
+
+__kernel void lbm_step(__global const LBM_FT* restrict f_src, __global LBM_FT* restrict f_dst,
                        __global const float* restrict h_src, __global float* restrict h_dst,
-                       __global const float* restrict bed, const LbmParams p,
-                       __global LbmGuard* guard)
+                       __global const float* restrict bed,
+                       __global const uchar* restrict mark_src, __global uchar* restrict mark_dst,
+                       const LbmParams p, __global LbmGuard* guard)
 {
     const int i = get_global_id(0), j = get_global_id(1);
     if (i >= p.nx || j >= p.ny) return;
@@ -113,7 +146,7 @@ __kernel void lbm_step(__global const float* restrict f_src, __global float* res
     const float wa = LBM_W_AXIS, wd = LBM_W_DIAG;
     float f[9];
     /*                                           a  cx  cy mx my opp w */
-    f[0] = f_src[n];
+    f[0] = lbm_load(f_src, 0, n, p);
     f[1] = lbm_pull(f_src, h_src, bed, p, i, j, 1, 1, 0, 5, 1, 5, wa, h_here, z_here);
     f[2] = lbm_pull(f_src, h_src, bed, p, i, j, 2, 1, 1, 4, 8, 6, wd, h_here, z_here);
     f[3] = lbm_pull(f_src, h_src, bed, p, i, j, 3, 0, 1, 3, 7, 7, wa, h_here, z_here);
@@ -123,11 +156,28 @@ __kernel void lbm_step(__global const float* restrict f_src, __global float* res
     f[7] = lbm_pull(f_src, h_src, bed, p, i, j, 7, 0, -1, 7, 3, 3, wa, h_here, z_here);
     f[8] = lbm_pull(f_src, h_src, bed, p, i, j, 8, 1, -1, 6, 2, 4, wd, h_here, z_here);
 
+    const float tau = guard->tau;
     int clamped = 0;
-    const float h = lbm_collide(f, p, 1.0f / guard->tau, &clamped);
-    if (clamped) atomic_inc(&guard->clamped);
+    float dh = 0.0f, fr2 = 0.0f;
+#if LBM_GUARD
+    const int own = mark_src[n];
+    const float omega = 1.0f / (own > 0 ? fmax(tau, LBM_TAU_DAMPED) : tau);
+#else
+    const float omega = 1.0f / tau;
+    (void)mark_src;
+    (void)mark_dst;
+#endif
+    const float h = lbm_collide(f, p, omega, &clamped, &dh, &fr2);
+#if LBM_GUARD
+    if (clamped) {
+        atomic_inc(&guard->clamped);
+        lbm_account(guard, dh);
+        if (fr2 > 0.0f) atomic_max((volatile __global uint*)&guard->peak_acc, as_uint(fr2));
+    }
+    mark_dst[n] = (uchar)(clamped ? LBM_DAMP_STEPS : lbm_mark_spread(mark_src, p, i, j, own));
+#endif
 
-    for (int a = 0; a < 9; ++a) f_dst[a * p.n_cells + n] = f[a];
+    for (int a = 0; a < 9; ++a) lbm_store(f_dst, a, n, p, f[a]);
 #if LBM_BED
     h_dst[n] = h;
 #else

@@ -8,14 +8,14 @@
 #include "lbm.h"
 
 /* eta = bed + h. Launch: 1D over the cells. */
-__kernel void lbm_surface_height(__global const float* restrict f,
+__kernel void lbm_surface_height(__global const LBM_FT* restrict f,
                                  __global const float* restrict bed, const LbmParams p,
                                  __global float* eta)
 {
     const int n = get_global_id(0);
     if (n >= p.n_cells) return;
     float h = 0.0f;
-    for (int a = 0; a < 9; ++a) h += f[a * p.n_cells + n];
+    for (int a = 0; a < 9; ++a) h += lbm_load(f, a, n, p);
     eta[n] = bed[n] + (isfinite(h) ? h : 0.0f);
 }
 

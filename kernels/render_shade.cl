@@ -5,6 +5,7 @@
 #include "common.h"
 #include "render_surface.h"
 #include "traverse.h"
+#include "caustics.h"
 
 inline float smooth01(float e0, float e1, float x)
 {
@@ -61,7 +62,8 @@ inline float3 shadow_transmittance(SCENE_PARAMS, RENDER_GEOM_PARAMS,
 inline void shadow_ray(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
                        __global const Light* restrict lights, __global const Ray* restrict rays,
                        __global const Hit* restrict hits, uint i,
-                       __global float4* restrict radiance)
+                       __global float4* restrict radiance,
+                       __global const float4* restrict caustic_map, const CausticParams* cp)
 {
     const Hit h = hits[i];
     if (h.prim < 0 || prm->n_lights == 0) return;
@@ -75,7 +77,11 @@ inline void shadow_ray(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Render
     facing_normals(&s, d, &nf_g, &nf_s);
     const float3 org = offset_ray(s.p, nf_g);
     float3 sum = (float3)(0.0f);
+    /* a pool surface seen through the water: the caustic map carries its lights (caustics.cl) */
+    const bool caustic = cp->enabled && h.inst == cp->pool_instance && r.medium >= 0;
+    if (caustic) sum = caustic_lookup(caustic_map, cp, s.p, nf_g) * s.kd;
     for (uint l = 0; l < prm->n_lights; l++) {
+        if (caustic && ((cp->light_mask >> l) & 1u)) continue;
         const Light li = lights[l];
         float3 ldir, E;
         float dist;
@@ -106,9 +112,11 @@ __kernel void render_shadow(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const R
                             __global const Light* restrict lights,
                             __global const Ray* restrict rays, __global const Hit* restrict hits,
                             __global const uint* counts, const uint depth,
-                            __global float4* restrict radiance)
+                            __global float4* restrict radiance,
+                            __global const float4* restrict caustic_map, const CausticParams cprm)
 {
     const uint n = counts[depth];
     for (uint i = get_global_id(0); i < n; i += get_global_size(0))
-        shadow_ray(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, i, radiance);
+        shadow_ray(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, i, radiance,
+                   caustic_map, &cprm);
 }

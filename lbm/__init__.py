@@ -11,8 +11,8 @@ See docs/lbm.md.
 
 from lbm.lattice import Lattice, Options, choose_lattice
 from lbm.mesh import grid_triangles
-from lbm.solver import Boundary, ShallowWater
+from lbm.solver import Boundary, ShallowWater, Storage
 from lbm.spec import from_water_spec
 
-__all__ = ["Boundary", "Lattice", "Options", "ShallowWater", "choose_lattice", "from_water_spec",
-           "grid_triangles"]
+__all__ = ["Boundary", "Lattice", "Options", "ShallowWater", "Storage", "choose_lattice",
+           "from_water_spec", "grid_triangles"]

@@ -21,7 +21,7 @@ import numpy as np
 import pyopencl as cl
 
 from kernels import Runtime, get_runtime
-from lbm.lattice import Lattice, Options, choose_lattice, equilibrium
+from lbm.lattice import GH_LIMIT, Lattice, Options, choose_lattice, equilibrium
 from lbm.limits import check_grid
 from lbm.structs import GUARD_DTYPE, PARAMS_DTYPE, PARTIAL_DTYPE, SOURCE_DTYPE, record
 
@@ -40,6 +40,28 @@ class Boundary(IntEnum):
         if not isinstance(name, str) or name.strip().upper() not in cls.__members__:
             raise ValueError(f"unknown boundary {name!r}; valid: {valid}")
         return cls[name.strip().upper()]
+
+
+class Storage(IntEnum):
+    """How populations are stored (kernels/lbm.h LBM_FP16S): float32, or float16 holding the
+    deviation from the lake at rest (arithmetic stays float32; FluidX3D's FP16S idea)."""
+
+    FP32 = 0
+    FP16S = 1
+
+    @classmethod
+    def from_str(cls, name) -> Storage:
+        if isinstance(name, cls):
+            return name
+        valid = ", ".join(m.name.lower() for m in cls)
+        if not isinstance(name, str) or name.strip().upper() not in cls.__members__:
+            raise ValueError(f"unknown storage {name!r}; valid: {valid}")
+        return cls[name.strip().upper()]
+
+    @property
+    def bytes(self) -> int:
+        """Bytes per stored population."""
+        return 2 if self is Storage.FP16S else 4
 
 
 class GuardAction(IntEnum):
@@ -93,12 +115,16 @@ class ShallowWater:
     The bed is flat at 0 and the water a lake at rest of depth ``options['depth']`` (1 m) until
     :meth:`set_state`. ``boundary``: ``"slip"`` (specular walls, the default) or ``"noslip"``
     (bounce-back). ``device``: None (default device), a device spec string, or a
-    :class:`kernels.Runtime`. Options (SI units) are those of :class:`lbm.lattice.Options`.
+    :class:`kernels.Runtime`. ``guard``: True (the limiter, local damping and checkpoint
+    restores) or False (the plain scheme: NaN is detected and reported, nothing is limited or
+    restored; for stability studies). ``storage``: ``"fp32"`` or ``"fp16s"`` (populations as
+    float16 deviations from the lake at rest; half the memory traffic). Options (SI units) are
+    those of :class:`lbm.lattice.Options`.
     Grid x (index i) is world x, grid y (index j) is world z; arrays are indexed [j, i].
     """
 
-    def __init__(self, nx: int, ny: int, dx: float, boundary: str = "slip", device=None,
-                 **options):
+    def __init__(self, nx: int, ny: int, dx: float, boundary: str = "slip", device=None, *,
+                 guard: bool = True, storage: str = "fp32", **options):
         for name, v in (("nx", nx), ("ny", ny)):
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or not 3 <= v <= 65536:
                 raise ValueError(f"{name}={v!r} must be an integer in [3, 65536]")
@@ -107,20 +133,28 @@ class ShallowWater:
         if self.dx <= 0:
             raise ValueError(f"dx={dx!r} must be > 0 (cell size in metres)")
         self.boundary = Boundary.from_str(boundary)
+        if not isinstance(guard, bool):
+            raise ValueError(f"guard={guard!r} must be True or False")
+        self.guard = guard
+        self.storage = Storage.from_str(storage)
+        self._defines = {"LBM_GUARD": int(guard), "LBM_FP16S": int(self.storage)}
         self.options = Options.from_kwargs(**options)
         self.rt: Runtime = device if isinstance(device, Runtime) else get_runtime(device)
         n = self.n_cells = self.nx * self.ny
         check_grid(self.rt, self.nx, self.ny)  # 32-bit indices and device memory (lbm.limits)
-        if 9 * 4 * n > self.rt.device.max_mem_alloc_size:
-            raise ValueError(f"grid {nx}x{ny} needs {36 * n / 2**20:.0f} MiB per population "
+        fb = 9 * self.storage.bytes * n
+        if fb > self.rt.device.max_mem_alloc_size:
+            raise ValueError(f"grid {nx}x{ny} needs {fb / 2**20:.0f} MiB per population "
                              f"buffer; the device allows {self.rt.device.max_mem_alloc_size >> 20}"
                              " MiB per buffer")
 
         # -- device buffers, allocated once -------------------------------------------------
-        fb, hb = 9 * 4 * n, 4 * n
+        hb = 4 * n
         self._f = PingPong(self.rt.buffer(fb), self.rt.buffer(fb))
         self._h = PingPong(self.rt.buffer(hb), self.rt.buffer(hb))
+        self._mark = PingPong(self.rt.buffer(n), self.rt.buffer(n))  # local damping marks
         self._bed = self.rt.buffer(hb)
+        self._zforce = self._bed   # the bed the step's force sees (+ hull pressure: lbm.bodies)
         self._f_ckpt = self.rt.buffer(fb)
         self._h_ckpt = self.rt.buffer(hb)
         self._guard = self.rt.buffer(GUARD_DTYPE.itemsize)
@@ -130,48 +164,96 @@ class ShallowWater:
         self._field_bufs = None  # h, u, v for fields(), on first call
 
         # -- kernels, looked up once --------------------------------------------------------
-        self._k_steps: dict[bool, tuple[cl.Kernel, cl.Kernel]] = {}
-        self._k_drop = self._kernel("lbm_sources.cl", "lbm_drop")
-        self._k_push = self._kernel("lbm_sources.cl", "lbm_push")
-        self._k_partial = self._kernel("lbm_reduce.cl", "lbm_reduce_partial")
-        self._k_final = self._kernel("lbm_reduce.cl", "lbm_reduce_final")
-        self._k_apply = self._kernel("lbm_guard.cl", "lbm_guard_apply")
-        self._k_height = self._kernel("lbm_surface.cl", "lbm_surface_height")
-        self._k_mesh = self._kernel("lbm_surface.cl", "lbm_surface_mesh")
-        self._k_fields = self._kernel("lbm_fields.cl", "lbm_fields")
+        self._k_steps: dict[bool, tuple] = {}
+        self._k_drop = self._kernel("lbm_sources.cl", "lbm_drop", "lbm.sources")
+        self._k_push = self._kernel("lbm_sources.cl", "lbm_push", "lbm.sources")
+        self._k_partial = self._kernel("lbm_reduce.cl", "lbm_reduce_partial", "lbm.guard")
+        self._k_final = self._kernel("lbm_reduce.cl", "lbm_reduce_final", "lbm.guard")
+        self._k_apply = self._kernel("lbm_guard.cl", "lbm_guard_apply", "lbm.guard")
+        self._k_height = self._kernel("lbm_surface.cl", "lbm_surface_height", "lbm.surface")
+        self._k_mesh = self._kernel("lbm_surface.cl", "lbm_surface_mesh", "lbm.surface")
+        self._k_fields = self._kernel("lbm_fields.cl", "lbm_fields", "lbm.fields")
 
         self._guard_host = np.zeros(1, GUARD_DTYPE)
         self._guard_evt: cl.Event | None = None
         self._reported = np.zeros(1, GUARD_DTYPE)  # counters at the last stats() call
         self._rain: _Rain | None = None
         self._rain_seed = None
+        self._step_hooks: list = []   # called after every step of step(n): coupled bodies
         self.time = 0.0
         self.steps = 0
         d = self.options.depth
         self.set_state(np.full((self.ny, self.nx), d))
 
     # -- construction helpers ---------------------------------------------------------------
-    def _kernel(self, source: str, name: str, defines: dict | None = None) -> cl.Kernel:
-        return cl.Kernel(self.rt.program(source, defines), name)
+    def _kernel(self, source: str, name: str, stage: str, defines: dict | None = None):
+        """A :class:`kernels.launch.Kernel` (arguments bound by name, timed as ``stage``)."""
+        return self.rt.kernel_launcher(source, name, stage=stage,
+                                       defines={**self._defines, **(defines or {})})
 
-    def _step_kernels(self, uneven: bool) -> tuple[cl.Kernel, cl.Kernel]:
+    def _step_kernels(self, uneven: bool) -> tuple:
         """The fused step for the current walls and bed kind, bound for both parities."""
         pair = self._k_steps.get(uneven)
         if pair is None:
             defines = {"LBM_BOUNDARY": int(self.boundary), "LBM_BED": int(uneven)}
-            pair = (self._kernel("lbm_step.cl", "lbm_step", defines),
-                    self._kernel("lbm_step.cl", "lbm_step", defines))
+            pair = (self._kernel("lbm_step.cl", "lbm_step", "lbm.step", defines),
+                    self._kernel("lbm_step.cl", "lbm_step", "lbm.step", defines))
             self._k_steps[uneven] = pair
         return pair
 
     def _bind_steps(self) -> None:
         """Bind both parities once: parity 0 reads f.current, parity 1 reads f.other."""
-        a, b = self._step_kernels(self._uneven)
-        f, h = self._f, self._h
-        for k, (fs, fd, hs, hd) in ((a, (f.current, f.other, h.current, h.other)),
-                                    (b, (f.other, f.current, h.other, h.current))):
-            k.set_args(fs, fd, hs, hd, self._bed, self._params, self._guard)
+        a, b = self._step_kernels(self._uneven or self._zforce is not self._bed)
+        f, h, m = self._f, self._h, self._mark
+        for k, (fs, fd, hs, hd, ms, md) in (
+                (a, (f.current, f.other, h.current, h.other, m.current, m.other)),
+                (b, (f.other, f.current, h.other, h.current, m.other, m.current))):
+            k.bind(f_src=fs, f_dst=fd, h_src=hs, h_dst=hd, bed=self._zforce, mark_src=ms,
+                   mark_dst=md, p=self._params, guard=self._guard)
         self._k_step_pair = (a, b)
+
+    def add_step_hook(self, hook) -> None:
+        """Call ``hook(dt)`` after every step of :meth:`step` (it must only enqueue): how
+        floating bodies (:class:`lbm.bodies.Boats`) follow the water step by step."""
+        if not callable(hook):
+            raise ValueError("add_step_hook: hook must be callable")
+        self._step_hooks.append(hook)
+
+    def remove_step_hook(self, hook) -> None:
+        if hook in self._step_hooks:
+            self._step_hooks.remove(hook)
+
+    def pressure_head_buffer(self) -> cl.Buffer:
+        """The device buffer (nx*ny float32, m) that the step's bed force reads as the bed: the
+        bed plus a surface pressure head that floating bodies write (:mod:`lbm.bodies`). Made
+        on the first call as a copy of the bed; from then on the step is the uneven-bed kernel.
+        The force is antisymmetric per link, so a pressure head moves water but never adds or
+        removes any."""
+        if self._zforce is self._bed:
+            self._zforce = self.rt.buffer(4 * self.n_cells)
+            cl.enqueue_copy(self.rt.queue, self._zforce, self._bed)
+            self._bind_steps()
+        return self._zforce
+
+    @property
+    def bed_buffer(self) -> cl.Buffer:
+        """The bed (nx*ny float32, m) on the device."""
+        return self._bed
+
+    @property
+    def params(self) -> np.void:
+        """The by-value ``LbmParams`` record every lbm kernel takes (kernels/lbm.h)."""
+        return self._params
+
+    @property
+    def populations_buffer(self) -> cl.Buffer:
+        """The current populations (storage as :attr:`storage`; read-only for other stages)."""
+        return self._f.current
+
+    @property
+    def defines(self) -> dict:
+        """Build defines of this solver's kernels (storage, guard)."""
+        return dict(self._defines)
 
     # -- public properties ------------------------------------------------------------------
     @property
@@ -186,7 +268,8 @@ class ShallowWater:
 
     @property
     def tau(self) -> float:
-        """BGK relaxation time from the viscosity (the guard may run with a larger one)."""
+        """BGK relaxation time from the viscosity (the guard's damping is local: cells it marks
+        relax with max(tau, 1) for a few steps; the rest of the grid keeps this tau)."""
         return self.lattice.tau
 
     @property
@@ -238,17 +321,19 @@ class ShallowWater:
                              f" exceeds max_froude={lat.max_froude:g} (supercritical flow is not"
                              " supported by D2Q9 LABSWE)")
         self.lattice: Lattice = lat
+        self._depth_chosen = float(h.max())   # the depth the lattice was chosen for
+        self._lattice_note = None
         self._uneven = bool(np.ptp(bed) > 0)
-        self._params = record(
-            PARAMS_DTYPE, nx=self.nx, ny=self.ny, n_cells=self.n_cells, dx=self.dx, e=lat.e,
-            g_lat=lat.g_lat, drag=lat.drag * lat.dt, h_min=lat.min_depth,
-            u2_max=lat.max_speed_ratio**2, fr2_max=lat.max_froude**2)
-        feq = equilibrium(h, u / lat.e, v / lat.e, lat.g_lat).astype(np.float32)
+        self._set_params(lat, float(h.mean()))
         q = self.rt.queue
-        cl.enqueue_copy(q, self._f.current, feq)
+        self._store_populations(equilibrium(h, u / lat.e, v / lat.e, lat.g_lat))
         h32 = h.astype(np.float32)
         cl.enqueue_copy(q, self._h.current, h32)
         cl.enqueue_copy(q, self._bed, bed.astype(np.float32))
+        if self._zforce is not self._bed:
+            cl.enqueue_copy(q, self._zforce, self._bed)
+        for m in (self._mark.current, self._mark.other):
+            cl.enqueue_fill_buffer(q, m, np.uint8(0), 0, self.n_cells)
         self._bed_host = bed.astype(np.float32)
         g = np.zeros(1, GUARD_DTYPE)
         g["tau"] = g["tau_user"] = lat.tau
@@ -265,6 +350,34 @@ class ShallowWater:
                              self._rain_seed)
         self._check(SaveRequest.FORCE)   # the first checkpoint, and the first statistics
 
+    def _set_params(self, lat: Lattice, h_ref: float) -> None:
+        """The by-value constants; for fp16s storage also the lake at rest of depth ``h_ref``
+        whose populations the stored float16 deviations are taken from."""
+        rest = np.zeros(3, np.float32)
+        if self.storage is Storage.FP16S:
+            h32, g32 = np.float32(h_ref), np.float32(lat.g_lat)
+            half = np.float32(0.5) * g32 * h32 * h32
+            ra, rd = np.float32(1 / 3) * half, np.float32(1 / 12) * half
+            rest[:] = (h32 - (np.float32(4) * ra + np.float32(4) * rd), ra, rd)
+        self._rest = rest
+        self._params = record(
+            PARAMS_DTYPE, nx=self.nx, ny=self.ny, n_cells=self.n_cells, dx=self.dx, e=lat.e,
+            g_lat=lat.g_lat, drag=lat.drag * lat.dt, h_min=lat.min_depth,
+            u2_max=lat.max_speed_ratio**2, fr2_max=lat.max_froude**2, rest0=rest[0],
+            rest_axis=rest[1], rest_diag=rest[2])
+
+    def _rest_planes(self) -> np.ndarray:
+        """(9, 1, 1) float32: the rest population of each direction (0 for fp32 storage)."""
+        r = np.array([self._rest[0]] + [self._rest[1], self._rest[2]] * 4, np.float32)
+        return r.reshape(9, 1, 1)
+
+    def _store_populations(self, f) -> None:
+        """Write populations (9, ny, nx) into f.current in the storage's format."""
+        f32 = np.ascontiguousarray(f, np.float32).reshape(9, self.ny, self.nx)
+        if self.storage is Storage.FP16S:
+            f32 = (f32 - self._rest_planes()).astype(np.float16)
+        cl.enqueue_copy(self.rt.queue, self._f.current, np.ascontiguousarray(f32))
+
     # -- stepping ---------------------------------------------------------------------------
     def _local_size(self):
         if self.options.local_size is not None:
@@ -273,9 +386,10 @@ class ShallowWater:
 
     def _enqueue_step(self) -> cl.Event:
         k = self._k_step_pair[self._parity]
-        evt = self.rt.launch("lbm.step", k, (self.nx, self.ny), self._local_size())
+        evt = k.launch((self.nx, self.ny), self._local_size())
         self._f.swap()
         self._h.swap()
+        self._mark.swap()
         self._parity ^= 1
         return evt
 
@@ -304,6 +418,8 @@ class ShallowWater:
             if self._rain is not None:
                 self._rain_due(self.time + self.dt)
             self._enqueue_step()
+            for hook in self._step_hooks:
+                hook(self.dt)
             self.time += self.dt
             self.steps += 1
             self._since_check += 1
@@ -324,14 +440,15 @@ class ShallowWater:
         """Guard check, all on the device: reduce, decide (restore / save / nothing), apply;
         then start a non-blocking read of the 80-byte guard record."""
         rt, p = self.rt, self._params
-        self._k_partial.set_args(self._f.current, p, self._partials)
-        rt.launch("lbm.guard", self._k_partial, self._n_partials * 256, 256)
-        self._k_final.set_args(self._partials, np.int32(self._n_partials), self._guard,
-                               np.int32(save))
-        rt.launch("lbm.guard", self._k_final, 256, 256)
-        self._k_apply.set_args(self._f.current, self._h.current, self._f_ckpt, self._h_ckpt, p,
-                               self._guard)
-        rt.launch("lbm.guard", self._k_apply, self.n_cells, 256 if rt.is_gpu else None)
+        self._k_partial.bind(f=self._f.current, mark=self._mark.current, p=p,
+                             partials=self._partials).launch(self._n_partials * 256, 256)
+        self._k_final.bind(partials=self._partials, n_partials=self._n_partials, g=self._guard,
+                           save=int(save)).launch(256, 256)
+        if self.guard:
+            self._k_apply.bind(f=self._f.current, h_buf=self._h.current, f_ckpt=self._f_ckpt,
+                               h_ckpt=self._h_ckpt, mark=self._mark.current, p=p,
+                               guard=self._guard).launch(self.n_cells,
+                                                         256 if rt.is_gpu else None)
         self._guard_evt = cl.enqueue_copy(rt.queue, self._guard_host, self._guard,
                                           is_blocking=False)
         self._since_check = 0
@@ -348,11 +465,11 @@ class ShallowWater:
             return None
         return i0, j0, i1 - i0 + 1, j1 - j0 + 1
 
-    def _launch_source(self, stage: str, kernel: cl.Kernel, box, **fields) -> None:
+    def _launch_source(self, kernel, box, volume=0.0, **fields) -> None:
         i0, j0, w, h = box
-        src = record(SOURCE_DTYPE, i0=i0, j0=j0, **fields)
-        kernel.set_args(self._f.current, self._h.current, self._params, src, self._guard)
-        self.rt.launch(stage, kernel, (w, h))
+        src = record(SOURCE_DTYPE, i0=i0, j0=j0, volume=volume, **fields)
+        kernel.bind(f=self._f.current, h_buf=self._h.current, mark=self._mark.current,
+                    p=self._params, s=src, guard=self._guard).launch((w, h))
         self._dirty = True
 
     def _check_radius(self, what: str, radius) -> float:
@@ -370,17 +487,43 @@ class ShallowWater:
                              f"[0, {lx:g}] x [0, {ly:g}] m")
         return x, y
 
+    @property
+    def max_drop_height(self) -> float:
+        """The tallest drop (m) :meth:`add_drop` accepts: the stability cap on the depth,
+        0.6 e^2 / g, less the depth the lattice was chosen for."""
+        return GH_LIMIT / self.lattice.g_lat - self._depth_chosen
+
     def add_drop(self, x: float, y: float, radius: float, height: float) -> None:
         """Add a smooth bump of water: height * (1 + cos(pi r/radius)) / 2 within ``radius`` m of
-        (x, y) m, at constant velocity (negative height: a dip). Where the result would break
-        the limits (min_depth, f0_eq >= 0) it is clipped and counted as clamped."""
+        (x, y) m, at constant velocity (negative height: a dip).
+
+        A drop taller than :attr:`max_drop_height` or a dip deeper than the water the lattice
+        was chosen for is refused (ValueError). Where the result still breaks the limits
+        (min_depth, the depth cap, f0_eq >= 0) the guard clips it, and ``stats()`` reports the
+        volume clipped or created and the cells limited."""
         x, y = self._check_point("add_drop", x, y)
         r = self._check_radius("add_drop", radius)
         amount = _finite("add_drop: height", height)
+        if amount > self.max_drop_height:
+            raise ValueError(f"add_drop: height={amount:g} m is above the stability limit: "
+                             f"water {self._depth_chosen:g} m deep can take drops up to "
+                             f"{self.max_drop_height:.4g} m (g h/e^2 <= {GH_LIMIT})")
+        if -amount >= self._depth_chosen:
+            raise ValueError(f"add_drop: height={amount:g} m would dig deeper than the water "
+                             f"({self._depth_chosen:g} m deep); dry cells are not supported")
         box = self._box(x - r, x + r, y - r, y + r)
         if box is not None:
-            self._launch_source("lbm.sources", self._k_drop, box, x=x, y=y, dx=0.0, dy=0.0,
-                                radius=r, amount=amount)
+            self._launch_source(self._k_drop, box, x=x, y=y, dx=0.0, dy=0.0,
+                                radius=r, amount=amount,
+                                volume=self._drop_volume(box, x, y, r, amount))
+
+    def _drop_volume(self, box, x, y, r, amount) -> float:
+        """Depth the drop kernel adds over its box before the limiter (sum over cells, m)."""
+        i0, j0, w, h = box
+        jj, ii = np.mgrid[j0:j0 + h, i0:i0 + w]
+        rr = np.hypot((ii + 0.5) * self.dx - x, (jj + 0.5) * self.dx - y)
+        dh = np.where(rr < r, amount * 0.5 * (1.0 + np.cos(np.pi * rr / r)), 0.0)
+        return float(dh.sum())
 
     def push(self, x: float, y: float, dx: float, dy: float, strength: float,
              radius: float | None = None) -> None:
@@ -397,7 +540,7 @@ class ShallowWater:
         box = self._box(min(x, x + ddx) - r, max(x, x + ddx) + r,
                         min(y, y + ddy) - r, max(y, y + ddy) + r)
         if box is not None:
-            self._launch_source("lbm.sources", self._k_push, box, x=x, y=y, dx=ddx, dy=ddy,
+            self._launch_source(self._k_push, box, x=x, y=y, dx=ddx, dy=ddy,
                                 radius=r, amount=s)
 
     def set_rain(self, rate: float, radius: float, height: float, seed: int = 0) -> None:
@@ -456,14 +599,13 @@ class ShallowWater:
         if self._eta is None:
             self._eta = self.rt.buffer(4 * self.n_cells)
         rt = self.rt
-        self._k_height.set_args(self._f.current, self._bed, self._params, self._eta)
-        rt.launch("lbm.surface", self._k_height, self.n_cells, 256 if rt.is_gpu else None)
-        origin4 = np.array([o[0], o[1], o[2], 0.0], np.float32).view(cl.cltypes.float4)[0]
-        self._k_mesh.set_args(self._eta, self._params, origin4, vertices_buf,
-                              normals_buf if normals_buf is not None else vertices_buf,
-                              np.int32(normals_buf is not None))
-        return rt.launch("lbm.surface", self._k_mesh, (self.nx, self.ny),
-                         (64, 1) if rt.is_gpu else None)
+        self._k_height.bind(f=self._f.current, bed=self._bed, p=self._params, eta=self._eta)
+        self._k_height.launch(self.n_cells, 256 if rt.is_gpu else None)
+        origin4 = np.array([o[0], o[1], o[2], 0.0], np.float32)
+        self._k_mesh.bind(eta=self._eta, p=self._params, origin=origin4, vertices=vertices_buf,
+                          normals=normals_buf if normals_buf is not None else vertices_buf,
+                          write_normals=int(normals_buf is not None))
+        return self._k_mesh.launch((self.nx, self.ny), (64, 1) if rt.is_gpu else None)
 
     def fields(self) -> dict[str, np.ndarray]:
         """Depth ``h`` (m), velocity ``u``, ``v`` (m/s) and ``bed`` (m) as float32 (ny, nx)
@@ -473,14 +615,14 @@ class ShallowWater:
         if self._field_bufs is None:
             self._field_bufs = [self.rt.buffer(4 * self.n_cells) for _ in range(3)]
         hb, ub, vb = self._field_bufs
-        self._k_fields.set_args(self._f.current, self._params, hb, ub, vb)
-        self.rt.launch("lbm.fields", self._k_fields, self.n_cells, 256 if self.rt.is_gpu else None)
+        self._k_fields.bind(f=self._f.current, p=self._params, h_out=hb, u_out=ub, v_out=vb)
+        self._k_fields.launch(self.n_cells, 256 if self.rt.is_gpu else None)
         shape = (self.ny, self.nx)
         out = {name: self.rt.to_host(b, np.float32, self.n_cells).reshape(shape)
                for name, b in (("h", hb), ("u", ub), ("v", vb))}
         out["bed"] = self._bed_host.copy()
         bad = [k for k, a in out.items() if not np.all(np.isfinite(a))]
-        if bad:  # the guard restores before any read; reaching this is a solver bug
+        if bad and self.guard:  # the guard restores before any read; this is a solver bug
             raise RuntimeError(f"internal error: non-finite {bad} after the guard check")
         return out
 
@@ -488,15 +630,24 @@ class ShallowWater:
         """Overwrite the stored populations (9, ny, nx) and the depth buffer (their sum) as they
         are, NaN included: for kernel tests. The next check sees whatever was loaded."""
         f = np.ascontiguousarray(f, np.float32).reshape(9, self.ny, self.nx)
-        cl.enqueue_copy(self.rt.queue, self._f.current, f)
+        self._store_populations(f)
         cl.enqueue_copy(self.rt.queue, self._h.current,
                         f.astype(np.float64).sum(0).astype(np.float32))
         self._dirty = True
 
     def populations(self) -> np.ndarray:
         """The stored post-collision populations (9, ny, nx) float32 (tests and debugging)."""
+        if self.storage is Storage.FP16S:
+            raw = self.rt.to_host(self._f.current, np.float16, 9 * self.n_cells)
+            return raw.reshape(9, self.ny, self.nx).astype(np.float32) + self._rest_planes()
         return self.rt.to_host(self._f.current, np.float32, 9 * self.n_cells).reshape(
             9, self.ny, self.nx)
+
+    def damped_cells(self) -> np.ndarray:
+        """Bool (ny, nx): cells the guard damps locally in the next step (their mark > 0).
+        A host copy, for tests."""
+        return self.rt.to_host(self._mark.current, np.uint8, self.n_cells).reshape(
+            self.ny, self.nx) > 0
 
     # -- the guard --------------------------------------------------------------------------
     def guard_record(self) -> np.void:
@@ -507,18 +658,31 @@ class ShallowWater:
         return self._guard_host[0].copy()
 
     def stats(self) -> dict:
-        """Statistics of the current state and what the guard did since the last call.
+        """Statistics of the current state, the volume budget and what the guard did since the
+        last call.
 
-        ``mass`` (m^3 of water), ``max_speed_ratio`` (max |u|/e), ``max_froude``, ``min_depth``
-        (m), ``nan`` (a non-finite value was found since the last call; it was replaced by the
-        checkpoint), and the counts since the last call: ``clamped`` (cells the limiter or a
-        source clipped), ``restored`` (checkpoint restores), ``damped`` (tau raises), ``saved``
-        (checkpoints); ``tau`` (the relaxation time in use), ``time``, ``steps`` and ``report``,
-        one line saying what happened.
+        State: ``mass`` (= ``volume``, m^3 of water), ``max_speed_ratio`` (max |u|/e),
+        ``min_depth`` (m), ``max_froude`` (the largest of the state's and of what the limiter saw
+        before clipping since the last call). Budget (m^3, cumulative since set_state):
+        ``volume_initial``, ``volume_sources`` (asked for by drops and rain; pushes ask for 0),
+        ``volume_clipped`` and ``volume_created`` (by the limiter and by restores), so that
+        ``volume_initial + volume_sources - volume_clipped + volume_created == volume`` to
+        float32 round-off. Since the last call: ``cells_limited`` (= ``clamped``, cell updates the
+        limiter clipped), ``restored`` (checkpoint restores), ``damped`` (checks with locally
+        damped cells), ``saved`` (checkpoints), ``nan`` (a non-finite value was found; with the
+        guard it was replaced by the checkpoint), ``acted`` (the guard limited or restored
+        anything); ``cells_damped`` (cells damped now), ``tau`` (unchanged by the guard),
+        ``lattice`` (a line when the lattice was re-chosen, else None), ``time``, ``steps``,
+        and ``report``, one line saying what happened ("ok" when nothing did).
         """
         g = self.guard_record()
         prev, self._reported = self._reported, np.array([g], GUARD_DTYPE)
-        return self.guard_summary(g, prev[0])
+        out = self.guard_summary(g, prev[0])
+        note = self._maybe_rechoose(out)
+        if note:
+            out["lattice"] = note
+            out["report"] = note if out["report"] == "ok" else out["report"] + "; " + note
+        return out
 
     @property
     def guard_buffer(self) -> cl.Buffer:
@@ -529,29 +693,79 @@ class ShallowWater:
         return self._guard
 
     def guard_summary(self, g: np.void, prev: np.void) -> dict:
-        """:meth:`stats`'s dict for guard record ``g``, counts taken since record ``prev``."""
+        """:meth:`stats`'s dict for guard record ``g``, counts taken since record ``prev``
+        (``lattice`` is always None here: only :meth:`stats` re-chooses the lattice)."""
         delta = {k: int(g[k]) - int(prev[k]) for k in ("clamped", "restored", "damped",
                                                         "saved")}
+        a = self.dx**2
+        # the Froude number the limiter saw before clipping, in the run of acting intervals
+        # that ended with the last check (lbm_reduce_final)
+        peak = float(g["peak_fr2"]) if delta["clamped"] else 0.0
+        fr2 = max(float(g["max_fr2"]), peak, 0.0)
+        nan = delta["restored"] > 0 if self.guard else int(g["nan_cells"]) > 0
         out = {
             "time": self.time,
             "steps": self.steps,
-            "mass": float(g["mass"]) * self.dx**2,
+            "mass": float(g["mass"]) * a,
+            "volume": float(g["mass"]) * a,
             "max_speed_ratio": math.sqrt(max(float(g["max_u2"]), 0.0)),
-            "max_froude": math.sqrt(max(float(g["max_fr2"]), 0.0)),
+            "max_froude": math.sqrt(fr2) if math.isfinite(fr2) else math.inf,
             "min_depth": float(g["min_h"]),
-            "nan": delta["restored"] > 0,   # every non-finite state found is restored
+            "nan": nan,
             "tau": float(g["tau"]),
             **delta,
+            "cells_limited": delta["clamped"],
+            "cells_damped": int(g["damped_cells"]),
+            "volume_initial": float(g["mass0"]) * a,
+            "volume_sources": float(g["sources"]) * a,
+            "volume_clipped": float(g["clipped"]) * a,
+            "volume_created": float(g["created"]) * a,
+            "acted": delta["clamped"] > 0 or delta["restored"] > 0,
+            "lattice": None,
         }
         parts = []
-        if delta["restored"]:
-            parts.append(f"non-finite values: restored the checkpoint {delta['restored']}x")
-        if delta["damped"]:
-            parts.append(f"damped: tau raised to {out['tau']:.4g} (viscosity tau "
-                         f"{self.lattice.tau:.4g})")
+        if nan:
+            parts.append(f"non-finite values: restored the checkpoint {delta['restored']}x"
+                         if self.guard else f"non-finite values in {int(g['nan_cells'])} cells "
+                         "(guard off: not restored)")
         if delta["clamped"]:
-            parts.append(f"clamped {delta['clamped']} cell updates to the limits (|u|/e <= "
+            parts.append(f"limited {delta['clamped']} cell updates (|u|/e <= "
                          f"{self.lattice.max_speed_ratio:g}, Fr <= {self.lattice.max_froude:g},"
-                         f" h >= {self.lattice.min_depth:g} m, f0_eq >= 0)")
+                         f" h >= {self.lattice.min_depth:g} m, f0_eq >= 0; max Fr seen "
+                         f"{out['max_froude']:.3g}), damped them locally; volume clipped "
+                         f"{out['volume_clipped']:.3g} m^3, created {out['volume_created']:.3g}"
+                         " m^3 so far")
         out["report"] = "; ".join(parts) if parts else "ok"
         return out
+
+    def _maybe_rechoose(self, s: dict) -> str | None:
+        """When rain or drops have deepened the water past the depth the lattice was chosen for
+        (mean depth above the midpoint of that depth and the design depth), choose e, dt and tau
+        again for the water as it is now and restart the populations at their equilibrium
+        (depth and velocity kept; the budget and time go on). Returns a line saying so."""
+        if not self.guard or s["nan"]:
+            return None
+        lat = self.lattice
+        mean = s["volume"] / (self.n_cells * self.dx**2)
+        if mean <= 0.5 * (self._depth_chosen + lat.design_depth):
+            return None
+        f = self.fields()
+        h = f["h"].astype(np.float64)
+        speed = np.hypot(f["u"], f["v"]).astype(np.float64)
+        new = choose_lattice(self.dx, float(h.max()), float(speed.max()), self.options)
+        old_e, old_dt = lat.e, lat.dt
+        self.lattice = new
+        self._depth_chosen = float(h.max())
+        self._set_params(new, float(h.mean()))
+        self._store_populations(equilibrium(h, f["u"] / new.e, f["v"] / new.e, new.g_lat))
+        g = self.guard_record()
+        g["tau"] = g["tau_user"] = new.tau
+        rec = np.array([g], GUARD_DTYPE)
+        cl.enqueue_copy(self.rt.queue, self._guard, rec)
+        self._reported = rec.copy()
+        self._bind_steps()
+        self._check(SaveRequest.FORCE)
+        return (f"the water deepened to {mean:.4g} m on average (the lattice was chosen for "
+                f"{lat.design_depth / self.options.depth_headroom:.4g} m): re-chose e "
+                f"{old_e:.4g} -> {new.e:.4g} m/s, dt {old_dt:.4g} -> {new.dt:.4g} s, tau "
+                f"{new.tau:.4g}")

@@ -33,10 +33,11 @@ import numpy as np
 import pyopencl as cl
 
 from kernels.launch import Kernel
-from kernels.pinned import PinnedRing, ReadHandle
 from kernels.limits import check_fits
+from kernels.pinned import PinnedRing, ReadHandle
 from kernels.runtime import Runtime
 from raytrace.bvh import HIT_DTYPE
+from raytrace.caustics import CAUSTIC_PARAMS
 from raytrace.render_scene import RenderScene
 from raytrace.render_types import (
     AOV,
@@ -193,6 +194,9 @@ class Renderer:
         self.params_buf = rt.buffer(RENDERPARAMS.itemsize)
         self._camera = None
         self.ticket = rt.to_device(np.zeros(1, np.uint32))  # render_scan's last-block ticket
+        # the caustic map render_shadow reads under the water (raytrace.caustics); off until set
+        self.caustic_map = rt.buffer(16)
+        self.caustic_params = np.zeros(1, CAUSTIC_PARAMS)[0]
         # this renderer's own kernels: raygen, and per depth level trace/shade/scan/gather
         self.k_raygen = rt.kernel_launcher("render_raygen.cl", "render_raygen",
                                            stage="render.raygen")
@@ -295,7 +299,8 @@ class Renderer:
             k["trace_shade"].bind(**scene, **shading, cam=self.camera_buf, **wave,
                                   hits=self.hits, **out)
             k["shadow"].bind(**scene, **shading, lights=self.scene.light_buf, **wave,
-                             hits=self.hits, radiance=self.radiance)
+                             hits=self.hits, radiance=self.radiance,
+                             caustic_map=self.caustic_map, cprm=self.caustic_params)
             k["scan"].bind(child_counts=self.child, counts=self.counts, depth=d,
                            capacity=self.capacity, block_sums=self.block_sums,
                            ticket=self.ticket, stats=self.stats)
@@ -306,6 +311,16 @@ class Renderer:
         self._bound_sig = bufs
 
     # -- inputs -----------------------------------------------------------------------------
+    def set_caustics(self, caustic_map: cl.Buffer | None, params=None) -> None:
+        """Read direct light under the water from ``caustic_map`` (a float4 irradiance atlas
+        made by :class:`raytrace.caustics.Caustics`, described by its CausticParams record);
+        None turns it off (shadow rays through the water, as before)."""
+        if caustic_map is None:
+            self.caustic_params = np.zeros(1, CAUSTIC_PARAMS)[0]
+            return
+        self.caustic_map = caustic_map
+        self.caustic_params = np.asarray(params, CAUSTIC_PARAMS).reshape(()).copy()
+
     def set_camera(self, eye, target, up=(0.0, 1.0, 0.0), fov: float = 60.0) -> None:
         """Camera for the next frames (uploaded with the frame, 96 bytes)."""
         self._camera = make_camera(eye, target, up, fov, self.settings)
@@ -368,6 +383,8 @@ class Renderer:
         self._levels = deepest
         self._bind(deepest)
         ks = self._k
+        for k in ks[: deepest + 1]:  # set only when the caustics changed (bytes compared)
+            k["shadow"].bind(caustic_map=self.caustic_map, cprm=self.caustic_params)
         ls = (s.local_size,)
         scan_ls = (SCAN_WG,)
         has_lights = len(self.scene.lights) > 0

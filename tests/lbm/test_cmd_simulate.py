@@ -99,3 +99,32 @@ def test_bad_steps_exit_2(scene, tmp_path, steps, capsys):
     assert exc.value.code == 2
     assert "--steps" in capsys.readouterr().err
     assert not (tmp_path / "o.npz").exists()
+
+
+# a dip to 1 mm at a cell centre in 0.2 m of water: below min_depth (2 mm), so the guard acts
+ACTING = SCENE.replace("x = 0.3\ny = 0.2\nradius = 0.1\nheight = 0.02",
+                       "x = 0.3125\ny = 0.2125\nradius = 0.1\nheight = -0.199")
+
+
+def test_guard_action_is_one_warning_line_and_strict_fails(tmp_path, capsys):
+    assert ACTING != SCENE
+    path = tmp_path / "acting.toml"
+    path.write_text(ACTING)
+    out = tmp_path / "o.npz"
+    assert main(["simulate", str(path), "--steps", "30", "--chunk", "10", "--save", str(out),
+                 "--quiet"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lbwater simulate: warning: the guard acted")
+    assert out.exists()
+    out2 = tmp_path / "o2.npz"
+    assert main(["simulate", str(path), "--steps", "30", "--save", str(out2), "--quiet",
+                 "--strict"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--strict: the guard acted" in err[0]
+    assert not out2.exists()
+
+
+def test_clean_run_prints_no_warning(scene, tmp_path, capsys):
+    assert main(["simulate", str(scene), "--steps", "30", "--save", str(tmp_path / "o.npz"),
+                 "--quiet", "--strict"]) == 0
+    assert capsys.readouterr().err == ""

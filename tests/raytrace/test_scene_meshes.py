@@ -38,7 +38,7 @@ def test_cache_is_made_and_invalidated(tmp_path):
 @pytest.mark.parametrize("text, match", [
     (None, "mesh file not found"),
     ("this is not a mesh \x00\x01", "unreadable|no triangles"),
-    ("v 0 0 0\nv 1 0 0\nl 1 2\n", "no triangles"),
+    ("v 0 0 0\nv 1 0 0\nl 1 2\n", "no triangles|no faces"),
     ("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n", "non-finite"),
 ])
 def test_bad_files_give_one_line_errors(tmp_path, text, match):

@@ -1,0 +1,285 @@
+"""Render a scene (and its ``[[timeline]]``) to an H.264 video or a PNG sequence, deterministically.
+
+    lbwater capture scenes/timeline.toml -o out/pool.mp4 --seconds 6 --fps 30
+    lbwater capture scenes/pool.toml --frames-dir out/frames --frames 90 --width 640 --height 360
+
+Every frame advances the water by exactly 1/fps s of simulated time, so the same scene, seed and
+device give the same bytes. Frames stream to the encoder (ffmpeg from imageio-ffmpeg: H.264,
+yuv420p, fragmented MP4) while the next frame renders: frame N+1 is enqueued before frame N is
+encoded. The video is written to ``NAME.partial.mp4`` beside the output and renamed at the end;
+Ctrl-C or a crash closes the encoder properly and leaves that partial video playable, and says
+where it is. An existing output is kept unless ``--force``; an unwritable output or a missing
+encoder fails before any simulation, naming the path given. A progress bar with ETA is drawn on
+a terminal only; the last line sums up frames, seconds, mean FPS and guard warnings.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from app.errors import InputError
+
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov")
+
+
+def add_arguments(p) -> None:
+    p.add_argument("scene", help="scene TOML file (may hold [[timeline]] entries)")
+    p.add_argument("-o", "--output", help="video file to write (.mp4, .mkv or .mov)")
+    n = p.add_mutually_exclusive_group()
+    n.add_argument("--frames", type=int, help="frames to render")
+    n.add_argument("--seconds", type=float,
+                   help="seconds of video (default: the timeline's end + 1 s, at least 3 s)")
+    p.add_argument("--fps", type=float, default=30.0, help="frames per second (default 30)")
+    p.add_argument("--width", type=int, help="image width (px, even); default from [render]")
+    p.add_argument("--height", type=int, help="image height (px, even)")
+    p.add_argument("--spp", type=int, help="samples per pixel")
+    p.add_argument("--bounces", type=int, help="maximum reflection/refraction depth")
+    p.add_argument("--seed", type=int, help="random seed (jitter, rain); default the scene's")
+    p.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
+    p.add_argument("--frames-dir", metavar="DIR",
+                   help="write a PNG sequence DIR/frame_000000.png ... (instead of or besides -o)")
+    p.add_argument("--quality", type=float, default=8.0,
+                   help="H.264 quality 0-10 (imageio-ffmpeg's scale; default 8)")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+
+
+# ---- checks before any simulation ------------------------------------------------------------
+def _check_numbers(args) -> None:
+    for name, lo, hi in (("frames", 1, 10**7), ("width", 2, 16384), ("height", 2, 16384),
+                         ("spp", 1, 4096), ("bounces", 0, 32), ("seed", 0, 2**32 - 1)):
+        v = getattr(args, name)
+        if v is not None and not lo <= v <= hi:
+            raise InputError(f"--{name} {v} is out of range; allowed [{lo}, {hi}]")
+    for name in ("width", "height"):
+        v = getattr(args, name)
+        if v is not None and v % 2:
+            raise InputError(f"--{name} {v} must be even (H.264 yuv420p halves the colour planes)")
+    if not (math.isfinite(args.fps) and 0.1 <= args.fps <= 1000):
+        raise InputError(f"--fps {args.fps:g} is out of range; allowed [0.1, 1000]")
+    if args.seconds is not None and not (math.isfinite(args.seconds) and 0 < args.seconds <= 1e5):
+        raise InputError(f"--seconds {args.seconds:g} is out of range; allowed (0, 1e5]")
+    if not 0 <= args.quality <= 10:
+        raise InputError(f"--quality {args.quality:g} is out of range; allowed [0, 10]")
+
+
+def partial_path(output: Path) -> Path:
+    """Where the video grows until it is complete: ``NAME.partial.SUFFIX`` beside it."""
+    return output.with_name(f"{output.stem}.partial{output.suffix}")
+
+
+def check_output(output: str, force: bool) -> Path:
+    """The video path, checked: suffix, no silent overwrite, folder writable (by creating the
+    partial file). One InputError naming ``output`` as the user gave it."""
+    path = Path(output)
+    if path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise InputError(f"-o {output!r} must end in {', '.join(VIDEO_SUFFIXES)}")
+    if path.is_dir():
+        raise InputError(f"-o {output!r} is a folder")
+    if path.exists() and not force:
+        raise InputError(f"-o {output!r} exists; use --force to overwrite it")
+    part = partial_path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(part, "wb"):
+            pass
+    except OSError as exc:
+        raise InputError(f"-o {output!r}: cannot write there ({exc.strerror or exc})") from None
+    return path
+
+
+def check_frames_dir(folder: str, force: bool) -> Path:
+    path = Path(folder)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--frames-dir {folder!r}: cannot create it ({exc.strerror or exc})") \
+            from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise InputError(f"--frames-dir {folder!r} is not writable")
+    if not force and any(path.glob("frame_*.png")):
+        raise InputError(f"--frames-dir {folder!r} already holds frame_*.png files; use --force")
+    return path
+
+
+def find_encoder() -> str:
+    """The ffmpeg of imageio-ffmpeg, with H.264 (libx264); else one InputError."""
+    try:
+        import imageio_ffmpeg
+
+        exe = imageio_ffmpeg.get_ffmpeg_exe()
+    except (ImportError, RuntimeError) as exc:
+        raise InputError(f"no video encoder: imageio-ffmpeg's ffmpeg is missing ({exc}); "
+                         "pip install imageio-ffmpeg, or use --frames-dir") from None
+    try:
+        out = subprocess.run([exe, "-hide_banner", "-encoders"], capture_output=True, text=True,
+                             timeout=30).stdout
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise InputError(f"no video encoder: {exe} does not run ({exc})") from None
+    if "libx264" not in out:
+        raise InputError(f"no video encoder: {exe} has no H.264 (libx264); use --frames-dir")
+    return exe
+
+
+# ---- the encoder -------------------------------------------------------------------------------
+class VideoWriter:
+    """H.264 yuv420p through imageio-ffmpeg's ``write_frames`` (ffmpeg in a subprocess that
+    ignores SIGINT, so Ctrl-C reaches only us and :meth:`close` still finishes the file).
+    Fragmented MP4: a file cut at any point plays up to its last fragment."""
+
+    def __init__(self, path: Path, size: tuple[int, int], fps: float, quality: float):
+        import imageio_ffmpeg
+
+        self.path, self.frames = path, 0
+        params = ["-movflags", "frag_keyframe+empty_moov+default_base_moof",
+                  "-g", str(max(1, round(fps))), "-flags", "+bitexact", "-fflags", "+bitexact",
+                  "-threads", "1"]
+        self._gen = imageio_ffmpeg.write_frames(
+            str(path), size, pix_fmt_in="rgb24", pix_fmt_out="yuv420p", fps=fps,
+            quality=quality, codec="libx264", macro_block_size=1, ffmpeg_log_level="error",
+            output_params=params)
+        self._gen.send(None)
+
+    def write(self, rgba: np.ndarray) -> None:
+        self._gen.send(np.ascontiguousarray(rgba[..., :3]))
+        self.frames += 1
+
+    def close(self) -> None:
+        if self._gen is not None:
+            gen, self._gen = self._gen, None
+            gen.close()
+
+
+def _write_png(folder: Path, index: int, rgba: np.ndarray) -> None:
+    import imageio.v3 as iio
+
+    from app.io import atomic_path
+
+    with atomic_path(folder / f"frame_{index:06d}.png") as tmp:
+        iio.imwrite(tmp, rgba, extension=".png")
+
+
+# ---- progress ----------------------------------------------------------------------------------
+class Progress:
+    """A one-line bar with ETA, redrawn on a terminal only (quiet when piped or --quiet)."""
+
+    def __init__(self, total: int, enabled: bool, stream=None):
+        self.total, self.stream = total, stream or sys.stderr
+        self.enabled = enabled and self.stream.isatty()
+        self.t0 = time.perf_counter()
+        self._last = 0.0
+
+    def update(self, done: int, note: str = "") -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self._last < 0.1 and done < self.total:
+            return
+        self._last = now
+        el = now - self.t0
+        rate = done / el if el > 0 else 0.0
+        eta = (self.total - done) / rate if rate > 0 else 0.0
+        w = 30
+        fill = int(w * done / max(self.total, 1))
+        self.stream.write(f"\r[{'#' * fill}{'.' * (w - fill)}] {done}/{self.total} "
+                          f"{rate:5.1f} FPS  ETA {int(eta) // 60}:{int(eta) % 60:02d} {note}  ")
+        self.stream.flush()
+
+    def finish(self) -> None:
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+# ---- the command -------------------------------------------------------------------------------
+def frame_count(args, timeline) -> int:
+    if args.frames is not None:
+        return int(args.frames)
+    seconds = args.seconds if args.seconds is not None else max(timeline.duration + 1.0, 3.0)
+    return max(1, round(seconds * args.fps))
+
+
+def run(args) -> int:
+    from app.frames import open_world
+    from app.scene import load_scene
+    from app.timeline import Timeline
+
+    if args.output is None and args.frames_dir is None:
+        raise InputError("give -o VIDEO.mp4 and/or --frames-dir DIR")
+    _check_numbers(args)
+    scene = load_scene(args.scene)
+    timeline = Timeline(scene, args.fps)
+    n = frame_count(args, timeline)
+    # every check that can fail without simulating comes first
+    video = None
+    if args.output is not None:
+        find_encoder()
+        out = check_output(args.output, args.force)
+    frames_dir = check_frames_dir(args.frames_dir, args.force) if args.frames_dir else None
+
+    world = open_world(scene, args.device, width=args.width, height=args.height, spp=args.spp,
+                       bounces=args.bounces, seed=args.seed)
+    size = world.size
+    if args.output is not None:
+        if size[0] % 2 or size[1] % 2:
+            raise InputError(f"{args.scene}: image {size[0]}x{size[1]} must have even sides for "
+                             "H.264 (use --width/--height)")
+        video = VideoWriter(partial_path(out), size, args.fps, args.quality)
+    log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
+    bar = Progress(n, not args.quiet)
+    dt = 1.0 / args.fps
+    guard_notes: list[str] = []
+    done, t0 = 0, time.perf_counter()
+    try:
+        timeline.apply(world, 0)
+        world.enqueue_frame(dt)
+        for i in range(n):
+            if i + 1 < n:            # the next frame renders while this one is encoded
+                timeline.apply(world, i + 1)
+                world.enqueue_frame(dt)
+            index, img = world.read_frame()
+            if index != i:
+                raise RuntimeError(f"internal error: frame {index} came back for frame {i}")
+            img = np.array(img, copy=True)
+            st = world.stats
+            if st is not None and st.frame == i and st.guard and (
+                    st.guard.get("nan") or st.guard.get("acted")):
+                guard_notes.append(f"frame {i}: {st.guard.get('report', 'guard acted')}")
+            if video is not None:
+                video.write(img)
+            if frames_dir is not None:
+                _write_png(frames_dir, i, img)
+            done += 1
+            bar.update(done, f"{len(guard_notes)} guard warnings" if guard_notes else "")
+    except BaseException:
+        bar.finish()
+        where = ""
+        if video is not None:
+            with contextlib.suppress(Exception):
+                video.close()
+            where = f"; partial video ({done} frames): {video.path}"
+        if frames_dir is not None:
+            where += f"; {done} PNG frames in {frames_dir}"
+        print(f"lbwater capture: stopped after {done} of {n} frames{where}", file=sys.stderr)
+        world.close()
+        raise
+    bar.finish()
+    world.close()
+    if video is not None:
+        video.close()
+        os.replace(video.path, out)
+    wall = time.perf_counter() - t0
+    target = ", ".join(str(p) for p in (args.output, args.frames_dir) if p)
+    guard = (f"{len(guard_notes)} guard warnings (first: {guard_notes[0]})" if guard_notes
+             else "guard: ok")
+    log(f"{target}: {n} frames {size[0]}x{size[1]} ({n / args.fps:.2f} s at {args.fps:g} fps), "
+        f"{wall:.1f} s wall, mean {n / wall:.2f} FPS, {guard}")
+    return 0

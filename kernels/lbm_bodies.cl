@@ -1,0 +1,236 @@
+/* Floating rigid bodies coupled both ways with the shallow water (lbm/bodies.py, docs/lbm.md).
+ * Per frame, no host copy:
+ *
+ *   lbm_bodies_step  x substeps   one work-group per body: sample the water under every footprint
+ *                                 column (bilinear head H = bed + hull pressure + h and velocity),
+ *                                 reduce buoyancy, drag, force and torque in local memory, then
+ *                                 work-item 0 integrates the rigid body (semi-implicit Euler with
+ *                                 added mass), stops it at the walls, writes its pose and its
+ *                                 row of the transform buffer (world_from_mesh)
+ *   lbm_bodies_press              one work-item per cell: zforce = bed + the hulls' pressure head,
+ *                                 the "bed" the step kernel's force sees, so a hull pushes water
+ *                                 away (a wake, waves) and conserves its volume exactly
+ *
+ * Hydrostatics: the pressure under a hull column whose bottom is at Y_b is rho g (H - Y_b), H the
+ * water's head there; the hull presses on the water with the head d = clamp(L - Y_b, 0, Y_t - Y_b),
+ * L the water level around the hull (the mean head over the footprint's ring of empty columns),
+ * so a hull at rest sits in a depression of its own draft. Defines: LBM_FP16S (lbm.h).
+ */
+#include "lbm.h"
+#include "lbm_bodies.h"
+
+/* The rotation matrix rows of a unit quaternion (w, x, y, z) stored in (x, y, z, w). */
+void lbm_quat_rows(const float4 q, float3* r0, float3* r1, float3* r2)
+{
+    const float w = q.x, x = q.y, y = q.z, z = q.w;
+    *r0 = (float3)(1.0f - 2.0f * (y * y + z * z), 2.0f * (x * y - w * z), 2.0f * (x * z + w * y));
+    *r1 = (float3)(2.0f * (x * y + w * z), 1.0f - 2.0f * (x * x + z * z), 2.0f * (y * z - w * x));
+    *r2 = (float3)(2.0f * (x * z - w * y), 2.0f * (y * z + w * x), 1.0f - 2.0f * (x * x + y * y));
+}
+
+/* Hamilton product of quaternions stored (w, x, y, z) in (x, y, z, w). */
+float4 lbm_quat_mul(const float4 a, const float4 b)
+{
+    return (float4)(a.x * b.x - a.y * b.y - a.z * b.z - a.w * b.w,
+                     a.x * b.y + a.y * b.x + a.z * b.w - a.w * b.z,
+                     a.x * b.z - a.y * b.w + a.z * b.x + a.w * b.y,
+                     a.x * b.w + a.y * b.z - a.z * b.y + a.w * b.x);
+}
+
+/* Head (m, world y), velocity (m/s, world x and z) of cell n. */
+void lbm_water_cell(__global const LBM_FT* f, __global const float* zforce, const LbmParams p,
+                    const int n, float* H, float* u, float* v)
+{
+    float fl[9], h, mx, my;
+    for (int a = 0; a < 9; ++a) fl[a] = lbm_load(f, a, n, p);
+    lbm_moments(fl, &h, &mx, &my);
+    *H = zforce[n] + h;
+    *u = p.e * mx / h;
+    *v = p.e * my / h;
+}
+
+/* The water at world (X, Z): bilinear between cell centres, clamped to the grid. */
+void lbm_water_at(__global const LBM_FT* f, __global const float* zforce, const LbmParams p,
+                  const float4 origin, const float X, const float Z, float* H, float* u, float* v)
+{
+    const float gx = clamp((X - origin.x) / p.dx - 0.5f, 0.0f, (float)(p.nx - 1));
+    const float gz = clamp((Z - origin.z) / p.dx - 0.5f, 0.0f, (float)(p.ny - 1));
+    const int i0 = min((int)gx, p.nx - 1), j0 = min((int)gz, p.ny - 1);
+    const int i1 = min(i0 + 1, p.nx - 1), j1 = min(j0 + 1, p.ny - 1);
+    const float fx = gx - (float)i0, fz = gz - (float)j0;
+    float H00, u00, v00, H10, u10, v10, H01, u01, v01, H11, u11, v11;
+    lbm_water_cell(f, zforce, p, LBM_CELL(p, i0, j0), &H00, &u00, &v00);
+    lbm_water_cell(f, zforce, p, LBM_CELL(p, i1, j0), &H10, &u10, &v10);
+    lbm_water_cell(f, zforce, p, LBM_CELL(p, i0, j1), &H01, &u01, &v01);
+    lbm_water_cell(f, zforce, p, LBM_CELL(p, i1, j1), &H11, &u11, &v11);
+    const float w00 = (1.0f - fx) * (1.0f - fz), w10 = fx * (1.0f - fz);
+    const float w01 = (1.0f - fx) * fz, w11 = fx * fz;
+    *H = origin.y + w00 * H00 + w10 * H10 + w01 * H01 + w11 * H11;
+    *u = w00 * u00 + w10 * u10 + w01 * u01 + w11 * u11;
+    *v = w00 * v00 + w10 * v10 + w01 * v01 + w11 * v11;
+}
+
+float3 lbm_rot(const float3 r0, const float3 r1, const float3 r2, const float3 v)
+{
+    return (float3)(dot(r0, v), dot(r1, v), dot(r2, v));
+}
+
+float3 lbm_rot_t(const float3 r0, const float3 r1, const float3 r2, const float3 v)
+{
+    return r0 * v.x + r1 * v.y + r2 * v.z;
+}
+
+#define LBM_BODY_ACC 9   /* force (3), torque (3), submerged volume, ring head sum, ring count */
+
+__kernel __attribute__((reqd_work_group_size(LBM_BODY_WG, 1, 1)))
+void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* restrict zforce,
+                     const LbmParams p, __global const float2* restrict foot,
+                     __global LbmBody* bodies, __global Transform* transforms,
+                     const LbmBodyStep s)
+{
+    __local float l_acc[LBM_BODY_ACC][LBM_BODY_WG];
+    const int b = get_group_id(0), lid = get_local_id(0);
+    if (b >= s.n_bodies) return;   /* uniform over the work-group */
+    LbmBody body = bodies[b];
+    if (body.flags.x == 0) return;
+    float3 r0, r1, r2;
+    lbm_quat_rows(body.quat, &r0, &r1, &r2);
+    const float3 pos = body.pos.xyz, vel = body.vel.xyz, omega = body.omega.xyz;
+    const int nfx = body.foot_n.x, n_s = body.foot_n.x * body.foot_n.y;
+    const float dA = body.foot.z * body.foot.w * fabs(r1.y);  /* column area seen from above */
+    float acc[LBM_BODY_ACC];
+    for (int k = 0; k < LBM_BODY_ACC; ++k) acc[k] = 0.0f;
+    for (int k = lid; k < n_s; k += LBM_BODY_WG) {
+        const float2 col = foot[body.foot_n.z + k];
+        const float xb = body.foot.x + (float)(k % nfx) * body.foot.z;
+        const float zb = body.foot.y + (float)(k / nfx) * body.foot.w;
+        float H, uw, vw;
+        if (col.y < col.x) {   /* a ring column: the water level around the hull */
+            const float3 P = pos + lbm_rot(r0, r1, r2, (float3)(xb, 0.0f, zb));
+            lbm_water_at(f, zforce, p, s.origin, P.x, P.z, &H, &uw, &vw);
+            acc[7] += H;
+            acc[8] += 1.0f;
+            continue;
+        }
+        const float3 Pb = pos + lbm_rot(r0, r1, r2, (float3)(xb, col.x, zb));
+        const float3 Pt = pos + lbm_rot(r0, r1, r2, (float3)(xb, col.y, zb));
+        lbm_water_at(f, zforce, p, s.origin, Pb.x, Pb.z, &H, &uw, &vw);
+        const float lo = fmin(Pb.y, Pt.y), hi = fmax(Pb.y, Pt.y);
+        const float sub = clamp(H - lo, 0.0f, hi - lo);
+        if (!(sub > 0.0f)) continue;
+        const float vc = sub * dA;
+        const float3 rel = (float3)(Pb.x, lo + 0.5f * sub, Pb.z) - pos;
+        const float3 vp = vel + cross(omega, rel);
+        const float m_w = s.rho * vc;   /* displaced water, kg */
+        const float3 F = (float3)(m_w * body.damping.y * (uw - vp.x),
+                                  m_w * (s.gravity - body.damping.x * vp.y),
+                                  m_w * body.damping.y * (vw - vp.z));
+        const float3 T = cross(rel, F);
+        acc[0] += F.x;
+        acc[1] += F.y;
+        acc[2] += F.z;
+        acc[3] += T.x;
+        acc[4] += T.y;
+        acc[5] += T.z;
+        acc[6] += vc;
+    }
+    for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] = acc[k];
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int w = LBM_BODY_WG / 2; w > 0; w >>= 1) {
+        if (lid < w) {
+            for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] += l_acc[k][lid + w];
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid != 0) return;
+
+    /* -- integrate (semi-implicit Euler, added mass) ---------------------------------------- */
+    const float3 Fh = (float3)(l_acc[0][0], l_acc[1][0], l_acc[2][0]);
+    const float3 Th = (float3)(l_acc[3][0], l_acc[4][0], l_acc[5][0]);
+    /* added mass in proportion to the part of the rest displacement under water (none in air) */
+    const float m = body.pos.w, dt = s.dt;
+    const float added = 1.0f + body.inertia.w * fmin(1.0f, l_acc[6][0] * s.rho / m);
+    float3 v2 = vel + dt * (Fh / (m * added) - (float3)(0.0f, s.gravity / added, 0.0f));
+    const float3 I = body.inertia.xyz;
+    float3 wb = lbm_rot_t(r0, r1, r2, omega);
+    const float3 tb = lbm_rot_t(r0, r1, r2, Th) - cross(wb, I * wb);
+    wb = (wb + dt * tb / (I * added)) / (1.0f + dt * body.damping.z);
+    const float3 w2 = lbm_rot(r0, r1, r2, wb);
+    float3 p2 = pos + dt * v2;
+    float4 q2 = body.quat + 0.5f * dt * lbm_quat_mul((float4)(0.0f, w2.x, w2.y, w2.z), body.quat);
+    q2 = normalize(q2);
+    /* walls: the hull's bounding radius stays inside the box */
+    const float r = body.damping.w;
+    const float lo_x = s.origin.x + r, hi_x = s.origin.x + s.size_x - r;
+    const float lo_z = s.origin.z + r, hi_z = s.origin.z + s.size_z - r;
+    if (p2.x < lo_x) { p2.x = lo_x; v2.x = fmax(v2.x, 0.0f); }
+    if (p2.x > hi_x) { p2.x = hi_x; v2.x = fmin(v2.x, 0.0f); }
+    if (p2.z < lo_z) { p2.z = lo_z; v2.z = fmax(v2.z, 0.0f); }
+    if (p2.z > hi_z) { p2.z = hi_z; v2.z = fmin(v2.z, 0.0f); }
+    /* the bed: the hull's lowest point stays above the lowest bed (a grounded boat) */
+    const float floor_y = s.origin.y + s.floor + body.vel.w;
+    if (p2.y < floor_y) { p2.y = floor_y; v2.y = fmax(v2.y, 0.0f); }
+    if (lo_x > hi_x) p2.x = s.origin.x + 0.5f * s.size_x;
+    if (lo_z > hi_z) p2.z = s.origin.z + 0.5f * s.size_z;
+    const int finite = all(isfinite(p2)) && all(isfinite(v2)) && all(isfinite(w2))
+                       && all(isfinite(q2));
+    if (finite) {
+        body.pos.xyz = p2;
+        body.vel.xyz = v2;   /* vel.w: the keel depth, kept */
+        body.omega.xyz = w2;
+        body.quat = q2;
+    } else {   /* keep the pose, stop the body: never a NaN in a transform */
+        body.vel.xyz = (float3)(0.0f);
+        body.omega.xyz = (float3)(0.0f);
+    }
+    body.force = (float4)(Fh, l_acc[6][0]);
+    body.torque.xyz = Th;   /* torque.w: the still-water level, set by the host */
+    bodies[b] = body;
+
+    /* world_from_mesh = [R | pos] . body_from_mesh */
+    lbm_quat_rows(body.quat, &r0, &r1, &r2);
+    const float3 c0 = (float3)(body.base_r0.x, body.base_r1.x, body.base_r2.x);
+    const float3 c1 = (float3)(body.base_r0.y, body.base_r1.y, body.base_r2.y);
+    const float3 c2 = (float3)(body.base_r0.z, body.base_r1.z, body.base_r2.z);
+    const float3 c3 = (float3)(body.base_r0.w, body.base_r1.w, body.base_r2.w);
+    Transform t;
+    t.r0 = (float4)(dot(r0, c0), dot(r0, c1), dot(r0, c2), dot(r0, c3) + body.pos.x);
+    t.r1 = (float4)(dot(r1, c0), dot(r1, c1), dot(r1, c2), dot(r1, c3) + body.pos.y);
+    t.r2 = (float4)(dot(r2, c0), dot(r2, c1), dot(r2, c2), dot(r2, c3) + body.pos.z);
+    transforms[body.foot_n.w] = t;
+}
+
+/* zforce = bed + the pressure head of every hull over the cell. Launch: 2D over (nx, ny). */
+__kernel void lbm_bodies_press(__global const float* restrict bed, __global float* zforce,
+                               const LbmParams p, __global const float2* restrict foot,
+                               __global const LbmBody* restrict bodies, const LbmBodyStep s)
+{
+    const int i = get_global_id(0), j = get_global_id(1);
+    if (i >= p.nx || j >= p.ny) return;
+    const int n = LBM_CELL(p, i, j);
+    const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
+    const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
+    float d = 0.0f;
+    for (int b = 0; b < s.n_bodies; ++b) {
+        const LbmBody body = bodies[b];
+        if (body.flags.x == 0) continue;
+        const float dxw = X - body.pos.x, dzw = Z - body.pos.z, r = body.damping.w;
+        if (dxw * dxw + dzw * dzw > r * r) continue;
+        float3 r0, r1, r2;
+        lbm_quat_rows(body.quat, &r0, &r1, &r2);
+        const float L = body.torque.w;
+        const float3 loc = lbm_rot_t(r0, r1, r2, (float3)(dxw, L - body.pos.y, dzw));
+        const int ix = (int)round((loc.x - body.foot.x) / body.foot.z);
+        const int iz = (int)round((loc.z - body.foot.y) / body.foot.w);
+        if (ix < 0 || iz < 0 || ix >= body.foot_n.x || iz >= body.foot_n.y) continue;
+        const float2 col = foot[body.foot_n.z + iz * body.foot_n.x + ix];
+        if (col.y < col.x) continue;
+        const float xc = body.foot.x + (float)ix * body.foot.z;
+        const float zc = body.foot.y + (float)iz * body.foot.w;
+        const float yb = body.pos.y + dot(r1, (float3)(xc, col.x, zc));
+        const float yt = body.pos.y + dot(r1, (float3)(xc, col.y, zc));
+        const float lo = fmin(yb, yt), hi = fmax(yb, yt);
+        d += clamp(L - lo, 0.0f, hi - lo);
+    }
+    zforce[n] = bed[n] + d;
+}

@@ -1,0 +1,566 @@
+"""Floating rigid bodies (boats) coupled both ways with the shallow water, stepped on the device.
+
+Host side of ``kernels/lbm_bodies.cl``. The host precomputes, once per hull, a compact
+description from the closed mesh (:class:`Hull`): volume, centre of mass and principal moments of
+a uniform solid, and a footprint height map (where the hull crosses vertical lines on a small grid
+in body coordinates, ringed by empty columns that measure the water level around the hull).
+Per frame, :meth:`Boats.enqueue_step` only enqueues: the bodies kernel (one work-group per boat:
+buoyancy and drag from the water under every column, a local reduction to force and torque, then
+semi-implicit Euler with added mass, walls, and the pose written into the caller's transform
+buffer as world_from_mesh), then the pressure kernel (the hulls' pressure head added to the bed
+the step's force sees: the hull pushes water away, so a moving boat makes a wake and a heaving
+one makes waves; water volume is conserved exactly). See docs/lbm.md, "Floating bodies".
+
+    boats = Boats(sim, [BoatSpec(V, F, mass=100.0, position=(1, 0.55, 1))],
+                  transform_buffer, rows=[3], origin=(0, 0, 0))
+    sim.step(k); boats.enqueue_step(k * sim.dt)     # per frame, no host sync
+    positions, quaternions = boats.poses()          # a host read, for tests and saving
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl as cl
+
+from lbm.structs import BODY_DTYPE, BODY_STEP_DTYPE, record
+
+#: Most boats one :class:`Boats` holds (the device array is allocated once at this size).
+MAX_BOATS = 16
+#: kernels/lbm_bodies.h LBM_BODY_WG.
+BODY_WG = 128
+RHO_WATER = 1000.0
+
+
+class HullError(ValueError):
+    """A hull mesh that cannot float: not closed, no volume, or too heavy."""
+
+
+# -- geometry of a closed triangle mesh -------------------------------------------------------
+def check_closed(F: np.ndarray) -> None:
+    """Every edge is shared by exactly two triangles, once in each direction (a closed,
+    consistently oriented surface); raises HullError naming the first bad edge."""
+    F = np.asarray(F, np.int64)
+    if F.ndim != 2 or F.shape[1] != 3 or len(F) < 4:
+        raise HullError(f"a hull needs at least 4 triangles, got faces of shape {F.shape}")
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    key = e[:, 0] * (int(F.max()) + 1) + e[:, 1]
+    rev = e[:, 1] * (int(F.max()) + 1) + e[:, 0]
+    uniq, counts = np.unique(key, return_counts=True)
+    if np.any(counts > 1):
+        a, b = divmod(int(uniq[np.argmax(counts > 1)]), int(F.max()) + 1)
+        raise HullError(f"the mesh is not closed: edge ({a}, {b}) is used twice in the same "
+                        "direction (inconsistent orientation or a non-manifold edge)")
+    missing = ~np.isin(rev, uniq)
+    if np.any(missing):
+        a, b = e[np.argmax(missing)]
+        raise HullError(f"the mesh is not closed: edge ({a}, {b}) has no neighbour across it "
+                        f"({int(missing.sum())} open edges)")
+
+
+def solid_properties(V: np.ndarray, F: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Volume (m^3), centroid (3,) and inertia tensor about the centroid per unit density
+    (3, 3) of the solid a closed mesh bounds, in float64 (signed tetrahedra from the origin)."""
+    V = np.asarray(V, np.float64)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    det = np.einsum("ij,ij->i", a, np.cross(b, c))       # 6 x signed volumes
+    vol = det.sum() / 6.0
+    if abs(vol) < 1e-12:
+        raise HullError("the mesh encloses no volume")
+    if vol < 0:   # inward-facing triangles: flip
+        det, vol = -det, -vol
+    centroid = (det[:, None] * (a + b + c)).sum(0) / (24.0 * vol)
+    # second moments int x_i x_j dV of each tetrahedron (0, a, b, c), summed
+    s = a + b + c
+    P = (det[:, None, None] / 120.0) * (np.einsum("ni,nj->nij", a, a) + np.einsum(
+        "ni,nj->nij", b, b) + np.einsum("ni,nj->nij", c, c) + np.einsum("ni,nj->nij", s, s))
+    P = P.sum(0) - vol * np.outer(centroid, centroid)
+    inertia = np.trace(P) * np.eye(3) - P
+    return float(vol), centroid, inertia
+
+
+def vertical_hits(V: np.ndarray, F: np.ndarray, xs: np.ndarray, zs: np.ndarray):
+    """Lowest and highest y where vertical lines through (xs[k], zs[k]) cross the mesh
+    (NaN where a line misses it), float64, by barycentric tests in the xz plane."""
+    V = np.asarray(V, np.float64)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    lo = np.full(len(xs), np.inf)
+    hi = np.full(len(xs), -np.inf)
+    d = (b[:, 2] - c[:, 2]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 2] - c[:, 2])
+    ok = np.abs(d) > 1e-18
+    a, b, c, d = a[ok], b[ok], c[ok], d[ok]
+    bx0 = np.minimum(np.minimum(a[:, 0], b[:, 0]), c[:, 0])
+    bx1 = np.maximum(np.maximum(a[:, 0], b[:, 0]), c[:, 0])
+    bz0 = np.minimum(np.minimum(a[:, 2], b[:, 2]), c[:, 2])
+    bz1 = np.maximum(np.maximum(a[:, 2], b[:, 2]), c[:, 2])
+    chunk = max(1, 2_000_000 // max(len(xs), 1))
+    for t0 in range(0, len(a), chunk):
+        sl = slice(t0, t0 + chunk)
+        px, pz = xs[None, :], zs[None, :]
+        inside_box = ((px >= bx0[sl, None]) & (px <= bx1[sl, None]) & (pz >= bz0[sl, None])
+                      & (pz <= bz1[sl, None]))
+        ti, si = np.nonzero(inside_box)
+        if len(ti) == 0:
+            continue
+        ti = ti + t0
+        x, z = xs[si] - c[ti, 0], zs[si] - c[ti, 2]
+        l1 = ((b[ti, 2] - c[ti, 2]) * x + (c[ti, 0] - b[ti, 0]) * z) / d[ti]
+        l2 = ((c[ti, 2] - a[ti, 2]) * x + (a[ti, 0] - c[ti, 0]) * z) / d[ti]
+        l3 = 1.0 - l1 - l2
+        eps = -1e-9
+        hit = (l1 >= eps) & (l2 >= eps) & (l3 >= eps)
+        y = l1 * a[ti, 1] + l2 * b[ti, 1] + l3 * c[ti, 1]
+        np.minimum.at(lo, si[hit], y[hit])
+        np.maximum.at(hi, si[hit], y[hit])
+    miss = ~np.isfinite(lo)
+    lo[miss] = np.nan
+    hi[miss] = np.nan
+    return lo, hi
+
+
+@dataclass(frozen=True)
+class Hull:
+    """A hull's compact description in body coordinates (origin at the centre of mass of the
+    uniform solid, axes of the placed mesh).
+
+    ``footprint`` (nfz, nfx, 2) float32: (bottom, top) of the hull on the vertical line through
+    sample (x0 + ix dfx, z0 + iz dfz), (1, 0) where there is no hull (a ring of such columns
+    measures the water level around it). ``volume`` (m^3), ``centroid`` (3,) in the placed
+    mesh's frame, ``inertia_unit`` (3, 3) per unit density about the centroid, ``radius`` the
+    largest horizontal distance of a hull column from the centre (m)."""
+
+    footprint: np.ndarray
+    x0: float
+    z0: float
+    dfx: float
+    dfz: float
+    volume: float
+    centroid: np.ndarray
+    inertia_unit: np.ndarray
+    radius: float
+    footprint_volume: float
+
+    @classmethod
+    def from_mesh(cls, V, F, *, spacing: float | None = None, max_samples: int = 40,
+                  ring: int = 2) -> Hull:
+        """From a closed mesh in its placed frame (metres, Y up). ``spacing``: footprint sample
+        spacing (m; default: the longer horizontal extent / (max_samples - 2 ring))."""
+        V = np.asarray(V, np.float64)
+        F = np.asarray(F, np.int64)
+        if V.ndim != 2 or V.shape[1] != 3 or not np.all(np.isfinite(V)):
+            raise HullError("hull vertices must be finite (n, 3) coordinates")
+        check_closed(F)
+        vol, c, inertia = solid_properties(V, F)
+        Vb = V - c
+        lo, hi = Vb.min(0), Vb.max(0)
+        ext = hi - lo
+        if spacing is None:
+            spacing = max(ext[0], ext[2]) / (max_samples - 2 * ring)
+        nfx = min(max_samples, int(math.ceil(ext[0] / spacing)) + 2 * ring)
+        nfz = min(max_samples, int(math.ceil(ext[2] / spacing)) + 2 * ring)
+        dfx = (ext[0] / max(nfx - 2 * ring, 1)) if ext[0] > 0 else spacing
+        dfz = (ext[2] / max(nfz - 2 * ring, 1)) if ext[2] > 0 else spacing
+        x0 = lo[0] + 0.5 * dfx - ring * dfx
+        z0 = lo[2] + 0.5 * dfz - ring * dfz
+        zz, xx = np.mgrid[0:nfz, 0:nfx]
+        xs, zs = (x0 + xx * dfx).ravel(), (z0 + zz * dfz).ravel()
+        bottom, top = vertical_hits(Vb, F, xs, zs)
+        empty = ~np.isfinite(bottom) | (top - bottom <= 1e-9)
+        fp = np.stack([np.where(empty, 1.0, bottom), np.where(empty, 0.0, top)], -1)
+        fp = fp.reshape(nfz, nfx, 2).astype(np.float32)
+        if empty.all():
+            raise HullError("the hull has no footprint (no vertical line crosses it)")
+        full = ~empty
+        radius = float(np.hypot(xs[full], zs[full]).max() + 0.5 * math.hypot(dfx, dfz))
+        fvol = float(((top - bottom)[full]).sum() * dfx * dfz)
+        return cls(fp, float(x0), float(z0), float(dfx), float(dfz), vol, c, inertia, radius,
+                   fvol)
+
+    def displaced(self, level: float) -> float:
+        """Volume (m^3) below body height ``level`` with the hull upright (footprint model)."""
+        b, t = self.footprint[..., 0].astype(np.float64), self.footprint[..., 1]
+        full = t >= b
+        return float(np.clip(level - b, 0.0, t - b)[full].sum() * self.dfx * self.dfz)
+
+    def rest_level(self, mass: float, rho: float = RHO_WATER) -> float:
+        """Body height of the water line where the upright hull floats with ``mass`` kg."""
+        b = self.footprint[..., 0][self.footprint[..., 1] >= self.footprint[..., 0]]
+        t = self.footprint[..., 1][self.footprint[..., 1] >= self.footprint[..., 0]]
+        lo, hi = float(b.min()), float(t.max())
+        want = mass / rho
+        for _ in range(100):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if self.displaced(mid) < want else (lo, mid)
+        return 0.5 * (lo + hi)
+
+    @property
+    def bottom(self) -> float:
+        """Lowest point of the hull in body coordinates (m)."""
+        fp = self.footprint
+        return float(fp[..., 0][fp[..., 1] >= fp[..., 0]].min())
+
+
+def _shift(hull: Hull, d: np.ndarray) -> Hull:
+    """The same hull in body coordinates whose origin moved by ``d`` (placed frame, m)."""
+    fp = hull.footprint.copy()
+    full = fp[..., 1] >= fp[..., 0]
+    fp[..., 0][full] -= d[1]
+    fp[..., 1][full] -= d[1]
+    zz, xx = np.mgrid[0:fp.shape[0], 0:fp.shape[1]]
+    xs, zs = hull.x0 - d[0] + xx * hull.dfx, hull.z0 - d[2] + zz * hull.dfz
+    radius = float(np.hypot(xs[full], zs[full]).max() + 0.5 * math.hypot(hull.dfx, hull.dfz))
+    return Hull(fp, hull.x0 - float(d[0]), hull.z0 - float(d[2]), hull.dfx, hull.dfz,
+                hull.volume, hull.centroid + d, hull.inertia_unit, radius,
+                hull.footprint_volume)
+
+
+def quat_from_matrix(R) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (float64)."""
+    R = np.asarray(R, np.float64)
+    t = np.trace(R)
+    if t > 0:
+        s = 2.0 * math.sqrt(t + 1.0)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(R)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(max(1.0 + R[i, i] - R[j, j] - R[k, k], 1e-300))
+        q = [0.0] * 4
+        q[0] = (R[k, j] - R[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (R[j, i] + R[i, j]) / s
+        q[1 + k] = (R[k, i] + R[i, k]) / s
+    q = np.asarray(q)
+    return q / np.linalg.norm(q) * (1 if q[0] >= 0 else -1)
+
+
+def matrix_from_quat(q) -> np.ndarray:
+    w, x, y, z = np.asarray(q, np.float64)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+@dataclass
+class BoatSpec:
+    """One boat. ``vertices`` (n, 3) and ``faces`` (m, 3) of a closed mesh; ``base`` (3, 4) or
+    (4, 4): the mesh's own placement (placed_from_mesh: size, centring); the initial pose is
+    world_from_placed = [``rotation`` (3x3) | ``position`` (m)], so the transform row written
+    is world_from_mesh = world_from_placed . base, as for a static mesh. ``mass`` (kg) or
+    ``density`` (kg/m^3 of the hull's volume); ``damping`` (heave, drift, rotation) in 1/s:
+    heave and drift relax the hull's velocity towards the water's (per kg of displaced water),
+    rotation damps its spin. ``mass_height``: height (m) of the centre of mass above the hull's
+    lowest point, above the solid's centroid (ballast; the inertia is the uniform solid's moved
+    there by the parallel-axis rule); None: the centroid of the uniform solid, which floats
+    upright only if the hull's metacentre is above it."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    mass: float | None = None
+    density: float | None = None
+    position: tuple = (0.0, 0.0, 0.0)
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    base: np.ndarray = field(default_factory=lambda: np.eye(4)[:3])
+    damping: tuple = (2.0, 1.0, 2.0)
+    added_mass: float = 0.5
+    mass_height: float | None = None
+    name: str = ""
+
+
+def _finite3(name, v) -> np.ndarray:
+    try:
+        a = np.asarray(v, np.float64).reshape(3)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}={v!r} must be three numbers") from None
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}={v!r} must be finite")
+    return a
+
+
+class Boats:
+    """Rigid floating bodies on ``sim`` (a :class:`lbm.ShallowWater`), stepped on the device.
+
+    ``transform_buffer``: the scene's device transform buffer (rows of ``Transform`` in
+    kernels/transform.h, 48 bytes); boat k writes row ``rows[k]`` (world_from_mesh) every step,
+    with no host copy. ``origin``: world position of the water grid's corner (as
+    ``sim.write_surface``'s origin), so the water surface is at ``origin.y + bed + h``.
+    ``rho``: water density (kg/m^3). ``coupled``: True (default) steps the boats after every
+    water step of ``sim.step(n)`` (a hook), so the hulls' pressure follows the water step by
+    step (holding it over several water steps lags the water's reaction and pumps energy into a
+    bobbing hull: measured, docs/lbm.md); False: the caller calls :meth:`enqueue_step`.
+    Building one reads the water's depth once (a host copy) to refuse boats that would touch
+    the bed.
+    """
+
+    def __init__(self, sim, specs, transform_buffer: cl.Buffer, rows, *,
+                 origin=(0.0, 0.0, 0.0), rho: float = RHO_WATER, max_substep: float = 1 / 120,
+                 coupled: bool = True):
+        self.sim, self.rt = sim, sim.rt
+        self.origin = _finite3("origin", origin)
+        self.rho = float(rho)
+        if not (self.rho > 0 and math.isfinite(self.rho)):
+            raise ValueError(f"rho={rho!r} must be a positive density (kg/m^3)")
+        self.max_substep = float(max_substep)
+        if not isinstance(transform_buffer, cl.Buffer):
+            raise ValueError("transform_buffer must be a pyopencl Buffer of Transform rows")
+        self.transforms = transform_buffer
+        self._zforce = sim.pressure_head_buffer()
+        self._bodies = self.rt.buffer(MAX_BOATS * BODY_DTYPE.itemsize)
+        self._host = np.zeros(MAX_BOATS, BODY_DTYPE)
+        self._hulls: list[Hull | None] = [None] * MAX_BOATS
+        self.names: list[str] = []
+        self._slots: list[int] = []
+        self._foot = None
+        defines = sim.defines
+        self._k_step = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_step",
+                                               stage="lbm.bodies", defines=defines)
+        self._k_press = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_press",
+                                                stage="lbm.bodies", defines=defines)
+        self._depth = None
+        self._floor = 0.0
+        specs, rows = list(specs), list(rows)
+        if len(specs) != len(rows):
+            raise ValueError(f"{len(specs)} boats but {len(rows)} transform rows")
+        for spec, row in zip(specs, rows, strict=True):
+            self._add(spec, row)
+        self._upload()
+        self.coupled = bool(coupled)
+        if self.coupled:
+            sim.add_step_hook(self.enqueue_step)
+
+    def close(self) -> None:
+        """Stop following the water (removes the step hook)."""
+        self.sim.remove_step_hook(self.enqueue_step)
+
+    # -- building -----------------------------------------------------------------------------
+    def _water(self) -> dict:
+        """The water's fields, read once (a host copy at construction, not per frame)."""
+        if self._depth is None:
+            self._depth = self.sim.fields()
+        return self._depth
+
+    def _add(self, spec: BoatSpec, row: int) -> int:
+        name = spec.name or f"boat {len(self.names)}"
+        free = [k for k in range(MAX_BOATS) if self._hulls[k] is None]
+        if not free:
+            raise ValueError(f"{name}: at most {MAX_BOATS} boats")
+        if isinstance(row, bool) or not isinstance(row, int | np.integer) or row < 0:
+            raise ValueError(f"{name}: transform row {row!r} must be an integer >= 0")
+        if (int(row) + 1) * 48 > self.transforms.size:
+            raise ValueError(f"{name}: transform row {row} is beyond the transform buffer "
+                             f"({self.transforms.size // 48} rows)")
+        base = np.asarray(spec.base, np.float64)
+        if base.shape == (4, 4):
+            base = base[:3]
+        if base.shape != (3, 4) or not np.all(np.isfinite(base)):
+            raise ValueError(f"{name}: base must be a finite 3x4 or 4x4 matrix")
+        R = np.asarray(spec.rotation, np.float64)
+        if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(
+                R) < 0:
+            raise ValueError(f"{name}: rotation must be a 3x3 rotation matrix")
+        pos = _finite3(f"{name}: position", spec.position)
+        V = np.asarray(spec.vertices, np.float64)
+        placed = V @ base[:, :3].T + base[:, 3]
+        try:
+            hull = Hull.from_mesh(placed, spec.faces)
+        except HullError as exc:
+            raise HullError(f"{name}: {exc}") from None
+        if (spec.mass is None) == (spec.density is None):
+            raise ValueError(f"{name}: give exactly one of mass (kg) or density (kg/m^3)")
+        mass = spec.mass if spec.mass is not None else spec.density * hull.volume
+        if not (isinstance(mass, int | float | np.floating) and math.isfinite(mass) and mass > 0):
+            raise ValueError(f"{name}: mass={mass!r} must be a positive number of kg")
+        floats = self.rho * min(hull.volume, hull.footprint_volume)
+        if mass >= 0.98 * floats:
+            raise HullError(f"{name}: mass {mass:.4g} kg sinks it: the hull displaces at most "
+                            f"{floats:.4g} kg of water (volume {hull.volume:.4g} m^3)")
+        damping = np.asarray(spec.damping, np.float64).reshape(3)
+        if not np.all(np.isfinite(damping)) or np.any(damping < 0):
+            raise ValueError(f"{name}: damping={tuple(spec.damping)} must be three rates >= 0 "
+                             "(1/s)")
+        # a boat must float free of the bed: its rest draft below 90% of the water's depth
+        draft = hull.rest_level(mass, self.rho) - hull.bottom
+        water = self._water()
+        depth = float(water["h"].min())
+        if draft >= 0.9 * depth:
+            raise HullError(f"{name}: its rest draft {draft:.3g} m needs water deeper than "
+                            f"{draft / 0.9:.3g} m (the water is {depth:.3g} m deep)")
+        k = free[0]
+        c = hull.centroid
+        inertia = hull.inertia_unit * (mass / hull.volume)
+        if spec.mass_height is not None:
+            mh = float(spec.mass_height)
+            top = float(hull.footprint[..., 1][hull.footprint[..., 1] >= hull.footprint[
+                ..., 0]].max())
+            if not (math.isfinite(mh) and 0 <= mh <= top - hull.bottom):
+                raise ValueError(f"{name}: mass_height={spec.mass_height!r} m must lie within "
+                                 f"the hull's height [0, {top - hull.bottom:.4g}] m")
+            cm = c + np.array([0.0, hull.bottom + mh, 0.0])
+            d = cm - c
+            inertia = inertia + mass * (d @ d * np.eye(3) - np.outer(d, d))
+            hull = _shift(hull, d)
+            c = cm
+        com = pos + R @ c
+        moments = np.diag(inertia)
+        body_from_mesh = np.hstack([base[:, :3], (base[:, 3] - c)[:, None]])
+        level = self.origin[1] + float(np.mean(water["h"].astype(np.float64) + water["bed"]))
+        self._floor = float(water["bed"].min())
+        self._level0 = level
+        rec = np.zeros(1, BODY_DTYPE)[0]
+        rec["pos"] = (*com, mass)
+        rec["quat"] = quat_from_matrix(R)
+        rec["vel"] = (0.0, 0.0, 0.0, -hull.bottom)
+        rec["inertia"] = (*moments, spec.added_mass)
+        rec["damping"] = (*damping, hull.radius)
+        rec["torque"] = (0.0, 0.0, 0.0, level)
+        rec["base_r0"], rec["base_r1"], rec["base_r2"] = body_from_mesh
+        rec["foot"] = (hull.x0, hull.z0, hull.dfx, hull.dfz)
+        rec["foot_n"] = (hull.footprint.shape[1], hull.footprint.shape[0], 0, int(row))
+        rec["flags"] = (1, 0, 0, 0)
+        self._host[k] = rec
+        self._hulls[k] = hull
+        self._slots.append(k)
+        self.names.append(name)
+        return k
+
+    def _upload(self) -> None:
+        """Footprints (concatenated) and body records to the device; bodies keep their state."""
+        parts, off = [], 0
+        for k in range(MAX_BOATS):
+            hull = self._hulls[k]
+            if hull is None:
+                self._host[k]["flags"] = (0, 0, 0, 0)
+                continue
+            self._host[k]["foot_n"][2] = off
+            parts.append(hull.footprint.reshape(-1, 2))
+            off += hull.footprint.shape[0] * hull.footprint.shape[1]
+        foot = np.concatenate(parts) if parts else np.zeros((1, 2), np.float32)
+        self._foot = self.rt.to_device(np.ascontiguousarray(foot, np.float32))
+        # the still-water level every hull presses against: the level without boats raised by
+        # the water they displace at rest (their mass / rho over the pool's area)
+        lx, ly = self.sim.size
+        if self._slots:
+            level = self._level0 + float(self._host["pos"][self._slots, 3].sum()) / (
+                self.rho * lx * ly)
+            for k in self._slots:
+                self._host[k]["torque"][3] = level
+        cl.enqueue_copy(self.rt.queue, self._bodies, self._host)
+        self._n = (max(self._slots) + 1) if self._slots else 0
+        self.enqueue_press()
+
+    def add(self, spec: BoatSpec, row: int) -> int:
+        """Add a boat writing transform row ``row``; returns its index in :attr:`names`. Reads
+        and rewrites the body records (a host round trip: not per frame)."""
+        self._sync_host()
+        self._add(spec, row)
+        self._upload()
+        return len(self.names) - 1
+
+    def drop(self, index: int) -> None:
+        """Remove boat ``index`` (its transform row is left as it was)."""
+        if not 0 <= index < len(self.names):
+            raise ValueError(f"drop: boat index {index} out of range [0, {len(self.names)})")
+        self._sync_host()
+        k = self._slots.pop(index)
+        self.names.pop(index)
+        self._hulls[k] = None
+        self._upload()
+
+    def _sync_host(self) -> None:
+        cl.enqueue_copy(self.rt.queue, self._host, self._bodies).wait()
+
+    # -- per frame ------------------------------------------------------------------------------
+    def _step_record(self, dt: float) -> np.void:
+        lx, ly = self.sim.size
+        return record(BODY_STEP_DTYPE, origin=(*self.origin, 0.0), dt=dt,
+                      gravity=self.sim.lattice.gravity, rho=self.rho, n_bodies=self._n,
+                      size_x=lx, size_z=ly, floor=self._floor)
+
+    def enqueue_step(self, dt: float) -> cl.Event | None:
+        """Advance the boats by ``dt`` seconds against the water as it is now (substeps of at
+        most ``max_substep``), write their transform rows, then their pressure head for the
+        next water steps. Only enqueues."""
+        if not (isinstance(dt, int | float | np.floating) and math.isfinite(dt) and dt >= 0):
+            raise ValueError(f"enqueue_step: dt={dt!r} must be a finite number >= 0 (s)")
+        if self._n == 0 or dt == 0:
+            return None
+        n_sub = max(1, math.ceil(dt / self.max_substep))
+        k = self._k_step.bind(f=self.sim.populations_buffer, zforce=self._zforce,
+                              p=self.sim.params, foot=self._foot, bodies=self._bodies,
+                              transforms=self.transforms, s=self._step_record(dt / n_sub))
+        for _ in range(n_sub):
+            k.launch(self._n * BODY_WG, BODY_WG)
+        return self.enqueue_press()
+
+    def enqueue_press(self) -> cl.Event:
+        """Write the hulls' pressure head into the bed the water's force sees."""
+        sim = self.sim
+        self._k_press.bind(bed=sim.bed_buffer, zforce=self._zforce, p=sim.params,
+                           foot=self._foot, bodies=self._bodies, s=self._step_record(0.0))
+        return self._k_press.launch((sim.nx, sim.ny), (64, 1) if self.rt.is_gpu else None)
+
+    # -- host reads (tests, saving) -------------------------------------------------------------
+    def state(self) -> np.ndarray:
+        """The body records (``BODY_DTYPE``) of the boats, in :attr:`names` order (host copy)."""
+        self._sync_host()
+        return self._host[self._slots].copy()
+
+    def poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """Centre-of-mass positions (n, 3) m and rotations (n, 4) as quaternions (w, x, y, z)."""
+        s = self.state()
+        return (s["pos"][:, :3].astype(np.float64).copy(),
+                s["quat"].astype(np.float64).copy())
+
+    def velocities(self) -> tuple[np.ndarray, np.ndarray]:
+        """Linear (n, 3) m/s and angular (n, 3) rad/s velocities."""
+        s = self.state()
+        return s["vel"][:, :3].astype(np.float64), s["omega"][:, :3].astype(np.float64)
+
+    def hull(self, index: int) -> Hull:
+        return self._hulls[self._slots[index]]
+
+    def pressure_head(self) -> np.ndarray:
+        """The hulls' pressure head (ny, nx) m on the water (zforce - bed; a host copy)."""
+        n = self.sim.n_cells
+        z = self.rt.to_host(self._zforce, np.float32, n)
+        b = self.rt.to_host(self.sim.bed_buffer, np.float32, n)
+        return (z - b).reshape(self.sim.ny, self.sim.nx)
+
+    def set_velocity(self, index: int, velocity) -> None:
+        """Set boat ``index``'s velocity (m/s): a push or a tow (a host round trip)."""
+        self._sync_host()
+        k = self._slots[index]
+        self._host[k]["vel"][:3] = _finite3("velocity", velocity)   # w: the keel depth
+        cl.enqueue_copy(self.rt.queue, self._bodies, self._host)
+
+
+def hull_proxy(V, F, deck: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """A closed stand-in for a hull that is not a closed mesh (a game asset with open parts): the
+    solid between the mesh's lowest surface and the height ``deck``, as one closed box per
+    column of a ``spacing`` grid (coincident faces of neighbouring boxes cancel in every
+    integral; each box is closed, so :func:`check_closed` accepts the union). Returns (V, F)."""
+    V = np.asarray(V, np.float64)
+    lo, hi = V.min(0), V.max(0)
+    nx = max(1, int(math.ceil((hi[0] - lo[0]) / spacing)))
+    nz = max(1, int(math.ceil((hi[2] - lo[2]) / spacing)))
+    zz, xx = np.mgrid[0:nz, 0:nx]
+    xs = lo[0] + (xx.ravel() + 0.5) * spacing
+    zs = lo[2] + (zz.ravel() + 0.5) * spacing
+    bottom, _ = vertical_hits(V, np.asarray(F, np.int64), xs, zs)
+    keep = np.isfinite(bottom) & (bottom < deck)
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (0, 1) for z in (-0.5, 0.5)])
+    box_f = np.array([(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
+                      (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)])
+    verts, faces = [], []
+    for k, (x, z, b) in enumerate(zip(xs[keep], zs[keep], bottom[keep], strict=True)):
+        c = corners.copy()
+        c[:, 0] = x + c[:, 0] * spacing
+        c[:, 2] = z + c[:, 2] * spacing
+        c[:, 1] = np.where(c[:, 1] > 0, deck, b)
+        verts.append(c)
+        faces.append(box_f + 8 * k)
+    if not verts:
+        raise HullError(f"no part of the mesh lies below the deck height {deck:g}")
+    return np.concatenate(verts), np.concatenate(faces)

@@ -1,0 +1,118 @@
+"""Caustics in the frame (app.world, docs/render.md): under still, flat water the picture with
+the caustic map equals the shadow-ray picture, the stage is timed under its own name, the toggle
+works, only the image and scalars cross per frame, and bad settings are one-line errors."""
+
+import numpy as np
+import pytest
+
+from app.errors import InputError
+from app.scene import parse_scene
+from app.world import World
+from tests.transfer_counter import TransferCounter
+
+FLAT = """
+[render]
+width = 48
+height = 32
+bounces = 3
+
+[camera]
+eye = [0.5, 1.4, -0.3]
+target = [0.5, 0.0, 0.55]
+
+[shading]
+caustic_photons = 4096      # 4 photons per floor texel
+caustic_resolution = 32
+caustic_filter = 1
+caustic_blend = 0.5
+
+[water]
+size = [1.0, 1.0]
+cells = [16, 16]
+depth = 0.3
+
+[[lights]]
+kind = "directional"
+direction = [0.0, -1.0, 0.0]
+color = [1.5, 1.4, 1.3]
+
+[pool]
+steps = 0
+wall_height = 0.45
+deck = 0.3
+"""
+
+
+@pytest.fixture
+def flat(tmp_path):
+    return parse_scene(FLAT, tmp_path / "flat.toml")
+
+
+def test_flat_water_picture_with_caustics_equals_the_shadow_ray_picture(flat, rt):
+    """The sun straight down through still water: the old shadow rays were exact here
+    (straight path = refracted path), so the caustic map must give the same picture."""
+    off = World(flat, rt).frame(0.0)
+    on_world = World(flat, rt, caustics="traced")
+    on = on_world.frame(0.0)
+    assert on_world.caustics == "traced"
+    diff = np.abs(on.astype(int) - off.astype(int))
+    assert diff.max() <= 1, diff.max()
+    # the pool floor under the water really is lit by the map: zero map, dark floor
+    c = on_world._caustics
+    E = c.read_map()["floor"]
+    assert np.allclose(E[4:-4, 4:-4], E[16, 16], rtol=1e-3) and E[16, 16, 0] > 1.0
+
+
+def test_the_caustics_stage_is_timed_and_toggled(flat, rt):
+    w = World(flat, rt, caustics="traced")
+    w.add_drop(0.5, 0.5, 0.15, 0.03)
+    w.frame(0.05)
+    w.frame(0.05)
+    assert w.stats.stage_ms.get("caustics.photons", 0) > 0
+    assert "caustics.filter" in w.stats.stage_ms
+    wavy = w.frame(0.05)
+    w.set_caustics("off")
+    assert w.caustics == "off"
+    plain = w.frame(0.0)
+    assert "caustics.photons" not in w.stats.stage_ms
+    ref = World(flat, rt)
+    ref.add_drop(0.5, 0.5, 0.15, 0.03)
+    for _ in range(3):
+        ref.frame(0.05)
+    assert np.array_equal(plain, ref.frame(0.0)), "off is the old picture exactly"
+    assert not np.array_equal(wavy, plain), "moving water makes caustics differ from rays"
+
+
+def test_caustic_frames_move_only_the_image_and_scalars(flat, rt):
+    w = World(flat, rt, caustics="traced")
+    w.frame(1 / 60)
+    image = 48 * 32 * 4
+    with TransferCounter() as c:
+        for i in range(8):
+            if i == 2:
+                w.add_drop(0.4, 0.6, 0.1, 0.02)
+            w.enqueue_frame(1 / 60)
+        w.drain()
+    assert not c.buffers
+    assert c.bytes / 8 <= image + 4096, c.calls[:12]
+
+
+def test_caustic_frames_are_deterministic(flat, rt):
+    def run():
+        w = World(flat, rt, caustics="traced")
+        w.add_drop(0.3, 0.4, 0.12, 0.03)
+        return [w.frame(1 / 30) for _ in range(3)]
+    a, b = run(), run()
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+def test_bad_caustic_settings_are_one_line_errors(flat, rt, tmp_path):
+    with pytest.raises(InputError, match=r"\[shading\].*projected.*not implemented"):
+        World(flat, rt, caustics="projected")
+    bad = FLAT.replace("caustic_blend = 0.5", "caustic_blend = 1.5")
+    with pytest.raises(InputError, match="caustic_blend"):
+        parse_scene(bad, tmp_path / "bad.toml")
+    nopool = parse_scene(FLAT.split("[pool]")[0], tmp_path / "nopool.toml")
+    w = World(nopool, rt)
+    with pytest.raises(InputError, match="no pool"):
+        w.set_caustics("traced")

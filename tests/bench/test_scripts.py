@@ -1,0 +1,59 @@
+"""The scripts in bench/ that BENCHMARKS.md and docs/lbm.md quote, run at tiny sizes: each must
+still run against the current API and produce what its figures are made of."""
+
+import csv
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[2] / "bench"
+
+
+def _script(name):
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", BENCH / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_lattice_stability_device(tmp_path, capsys, rt):
+    out = tmp_path / "s.csv"
+    rc = _script("lattice_stability").main(
+        ["--n", "16", "--sigma", "2", "--ratios", "0.5,0.62", "--taus", "0.6",
+         "--seconds", "0.2", "--out", str(out)])
+    assert rc == 0
+    rows = {r["ratio"]: r for r in csv.DictReader(out.open())}
+    assert rows["0.5"]["clamped"] == "0" and int(rows["0.5"]["steps"]) > 30
+    assert "lattice_speed" in rows["0.62"]["refused"]   # above the limiter's cap of 0.6
+    assert "| 0.62 | refused |" in capsys.readouterr().out
+
+
+def test_lattice_stability_reference_finds_the_instability(capsys):
+    rc = _script("lattice_stability").main(
+        ["--solver", "reference", "--n", "16", "--sigma", "2", "--ratios", "0.5,0.64",
+         "--taus", "0.505", "--seconds", "0.5"])
+    assert rc == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "| 0.50 | 0 |" in lines
+    row = next(ln for ln in lines if ln.startswith("| 0.64 |"))
+    assert int(row.split("|")[2]) > 100
+
+
+def test_ab_radix_bits_same_tree(capsys, rt):
+    rc = _script("ab_radix_bits").main(["--n", "40", "--rounds", "2", "--builds", "1"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["same_tree"] is True
+    assert (out["bits4_passes"], out["bits8_passes"]) == (8, 4)
+    assert len(out["bits4_round_wall_ms"]) == 2 and out["bits8_device_ms"] > 0
+
+
+def test_ab_embree_interleaved(capsys, rt):
+    pytest.importorskip("embreex", reason="embreex is a test dependency (pyproject.toml)")
+    rc = _script("ab_embree_interleaved").main(["--n", "17", "--rounds", "1", "--rays", "small"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    for kind in ("primary", "incoherent"):
+        assert out[kind]["same_hit_fraction"] >= 0.999
+        assert out[kind]["ours_Mrays_s"] > 0 and out[kind]["embree_1t_Mrays_s"] > 0
