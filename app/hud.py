@@ -195,18 +195,19 @@ def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
 
 
 def guard_lines(stats) -> list[str]:
-    """Warnings when the water solver had to act (clamped cells, NaN restored)."""
+    """Warnings when the water solver acted in the last frame (NaN restored, cells limited,
+    tau raised); the guard dict is the solver's ``stats()`` for that frame."""
     if stats is None or not stats.guard:
         return []
     g = stats.guard
     out = []
     if g.get("nan"):
-        out.append("water: NaN found, state restored")
-    n = int(g.get("cells_limited", 0) or 0)
+        out.append(f"water: non-finite values, checkpoint restored {g.get('restored', 0)}x")
+    n = int(g.get("clamped", 0) or 0)
     if n:
-        out.append(f"water: {n} cells clamped")
-    if g.get("volume_clipped"):
-        out.append(f"water: {g['volume_clipped']:.3g} m^3 clipped")
+        out.append(f"water: {n} cell updates limited (max Froude {g.get('max_froude', 0):.2f})")
+    if g.get("damped"):
+        out.append(f"water: viscosity raised (tau {g.get('tau', 0):.3f})")
     return out
 
 

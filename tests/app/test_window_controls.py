@@ -233,7 +233,7 @@ class Stats:
     stage_ms = {"render.trace": 3.0, "lbm.step": 1.25}
     n_rays, n_triangles, wall_ms = 2_500_000, 12345, 5.0
     water_cells = (32, 24)
-    guard = {"nan": False, "cells_limited": 7}
+    guard = {"nan": False, "clamped": 7, "max_froude": 0.91, "damped": 0}
 
 
 def test_hud_lines_show_fps_stages_grid_rays_device_and_guard_warnings():
@@ -242,7 +242,7 @@ def test_hud_lines_show_fps_stages_grid_rays_device_and_guard_warnings():
     for want in ("59.9 FPS", "render.trace\t3.000 ms", "grid 32x24", "12,345 triangles",
                  "2.50 M rays", "device: PoCL", "display: copy", "64x48"):
         assert want in text
-    assert guard_lines(Stats) == ["water: 7 cells clamped"]
+    assert guard_lines(Stats) == ["water: 7 cell updates limited (max Froude 0.91)"]
     assert hud_lines(None, fps=0, path="copy")[-1] == "display: copy"
     assert help_lines([("R", "rain")])[1] == "R\train"
 
