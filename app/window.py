@@ -449,6 +449,7 @@ class Viewer:
                                 cells=self.cells)
         self.controls.reapply(self.world, camera=False)
         self.next_frame = 0       # index of the next frame to enqueue (event time base)
+        self._size_seen = tuple(self.world.size)
         self.in_flight = 0
         self.shown = 0
         self.t0 = time.perf_counter()
@@ -602,8 +603,12 @@ class Viewer:
         req = self.controls.apply(self.world)
         if req.fullscreen:
             self._toggle_fullscreen()
+        # a new window size rebuilds the World once it has held for a frame (a drag-resize
+        # does not rebuild at every step; meanwhile the image is stretched to the window)
         want = scaled_size(self.controls.window_size, self.quality.scale)
-        if req.rebuild or want != tuple(self.world.size):
+        resized = want != tuple(self.world.size) and want == self._size_seen
+        self._size_seen = want
+        if req.rebuild or resized:
             self._rebuild(**req.rebuild)
         more = limit is None or self.next_frame < limit
         if more and not req.quit:

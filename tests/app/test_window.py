@@ -285,16 +285,24 @@ def test_resize_mid_run_rebuilds_at_the_new_size(viewer):
     v = viewer
     for _ in range(2):
         v.step()
-    v.glfw.set_window_size(v.win, 96, 72)
-    for _ in range(50):                       # X applies the size asynchronously
+    w0 = v.world
+    v.on_resize(80, 60)                      # a drag-resize: sizes change from frame to frame
+    v.step()
+    v.on_resize(96, 72)
+    v.step()
+    assert v.world is w0                     # not rebuilt while the size keeps changing
+    v.step()
+    assert v.world is not w0 and tuple(v.world.size) == (96, 72)
+    v.glfw.set_window_size(v.win, 80, 60)    # and through glfw, as a user's resize arrives
+    for _ in range(50):                      # X applies the size asynchronously
         v.step()
-        if tuple(v.world.size) == (96, 72):
+        if tuple(v.world.size) == (80, 60):
             break
-    assert tuple(v.world.size) == (96, 72)
+    assert tuple(v.world.size) == (80, 60)
     v.step()
     v.step()
-    assert v.snapshot().shape == (72, 96, 4)
-    assert any(e["kind"] == "resize" for e in v.recording)
+    assert v.snapshot().shape == (60, 80, 4)
+    assert [e["width"] for e in v.recording if e["kind"] == "resize"][-1] == 80
 
 
 def test_keys_that_rebuild_keep_the_camera_and_fullscreen_toggles(viewer):
