@@ -367,3 +367,23 @@ def test_no_display_is_one_line_and_status_2():
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and "no display" in lines[0] and "lbwater capture" in lines[0]
     assert "Traceback" not in p.stderr and p.stdout == ""
+
+
+def test_auto_quality_measures_a_probe_and_aims_lower_for_a_higher_target(scene, rt):
+    import argparse
+
+    from app.quality import ladder
+    from app.window import decide_quality
+
+    def pick(fps):
+        args = argparse.Namespace(quality="auto", target_fps=fps, cells=None, scale=None,
+                                  bounces=None, spp=None)
+        return decide_quality(args, scene, rt, (64, 48), FRAME_TIME)
+
+    easy, hard = pick(0.5), pick(1e5)
+    rungs = ladder(32, 1)
+    assert (easy.cells, easy.scale, easy.bounces) == rungs[0]       # 2 s a frame: the best
+    assert (hard.cells, hard.scale, hard.bounces) == rungs[-1]      # 10 us: the least
+    assert 0 < easy.predicted_ms <= 2000      # fits its budget
+    assert hard.predicted_ms > 1000 / 1e5     # nothing fits: the last rung, said so
+    assert "auto" in easy.describe() and "predicted" in hard.describe()
