@@ -171,7 +171,7 @@ class Hud:
 # ---- what the HUD says (pure) -------------------------------------------------------------------
 def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
               quality: str = "", paused: bool = False, rain: float = 0.0, spp: int = 1,
-              bounces: int = 0, top: int = 6) -> list[str]:
+              bounces: int = 0, caustics: str = "", top: int = 6) -> list[str]:
     """The HUD's text from a FrameStats-like record (None before the first frame)."""
     lines = [f"{fps:5.1f} FPS" + ("  [paused]" if paused else "")
              + (f"  rain {rain:g}/s" if rain else "")]
@@ -180,7 +180,8 @@ def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
     w, h = size
     cells = getattr(stats, "water_cells", None)
     lines.append(f"{w}x{h}  {spp} spp  {bounces} bounces  "
-                 + (f"grid {cells[0]}x{cells[1]}" if cells else "no water"))
+                 + (f"grid {cells[0]}x{cells[1]}" if cells else "no water")
+                 + (f"  caustics {caustics}" if caustics else ""))
     lines.append(f"{stats.n_triangles:,} triangles  {stats.n_rays / 1e6:.2f} M rays/frame")
     ms = sorted(stats.stage_ms.items(), key=lambda kv: -kv[1])
     kernel = sum(v for _, v in ms)

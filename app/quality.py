@@ -164,12 +164,12 @@ def costs_from_stats(stats_list, wall_ms: float, *, n_cells: int, steps: float) 
     cell = typical([stage_sum(("lbm.surface", "bvh.", "render.geometry"), s) for s in stats_list])
     ray = typical([stage_sum(("render.",), s) - stage_sum(("render.geometry",), s)
                    for s in stats_list])
-    kernel = typical([sum(s.stage_ms.values()) for s in stats_list])
+    # everything else (other stages, launches, read-back, host work) counts as fixed
     rays = max(1, stats_list[-1].n_rays)
     depth = stats_list[-1].rays_per_depth or (rays,)
     ratio = tuple(d / max(1, depth[0]) for d in depth) if depth[0] else (1.0,)
     return Costs(per_cell_step=lbm / max(1, n_cells * steps), per_cell=cell / max(1, n_cells),
-                 per_ray=ray / rays, fixed=max(0.0, wall_ms - kernel), ray_ratio=ratio,
+                 per_ray=ray / rays, fixed=max(0.0, wall_ms - lbm - cell - ray), ray_ratio=ratio,
                  steps_per_frame=steps)
 
 

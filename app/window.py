@@ -657,7 +657,8 @@ class Viewer:
                               size=tuple(self.world.size), device=self.world.device_name,
                               quality=self.quality.describe(), paused=c.paused,
                               rain=c.rain_rate if c.rain_on else 0.0, spp=c.spp,
-                              bounces=c.bounces)
+                              bounces=c.bounces,
+                              caustics=str(getattr(self.world, "caustics", "") or ""))
             blocks.append((lines, 8, 8))
             warn = guard_lines(self.world.stats)
             if warn:

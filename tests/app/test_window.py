@@ -314,13 +314,17 @@ def test_keys_that_rebuild_keep_the_camera_and_fullscreen_toggles(viewer):
     v.on_button(Button.LEFT, False)
     v.step()
     camera = v.world.camera
+    assert v.world.caustics == "off"                     # the scene's
+    v.on_action(Action.TOGGLE_CAUSTICS)
+    assert v.world.caustics == "traced"
     for a in (Action.GRID_DOWN, Action.BOUNCES_UP, Action.SPP_2):
         v.on_action(a)
     v.step()
     v.step()
     assert v.world.stats.water_cells == (21, 16)         # 32 / 1.5 along the longer side
     assert (v.world.bounces, v.world.spp) == (2, 2)
-    assert v.world.camera == camera
+    assert v.world.camera == camera and v.world.caustics == "traced"   # kept by the rebuild
+    assert any(k.startswith("caustics.") for k in v.world.stats.stage_ms)
     v.on_action(Action.FULLSCREEN)
     for _ in range(30):
         v.step()
