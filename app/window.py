@@ -114,12 +114,14 @@ def require_display() -> None:
 
 
 # ---- worlds -------------------------------------------------------------------------------------
-def make_world(scene, device, *, size, spp, bounces, cells):
-    """The World the window drives (docs/frame_api.md), ``cells`` along the pool's longer side."""
+def make_world(scene, device, *, size, spp, bounces, cells, caustics=None):
+    """The World the window drives (docs/frame_api.md), ``cells`` along the pool's longer side;
+    ``caustics`` False turns the scene's traced caustics off (None keeps the scene's)."""
     from app.world import World
 
     return World(scene, device, width=size[0], height=size[1], spp=spp, bounces=bounces,
-                 cells=None if scene.water is None else cells)
+                 cells=None if scene.water is None else cells,
+                 caustics="off" if caustics is False else None)
 
 
 def display_path(rt, upload: str = "pbo") -> str:
@@ -163,14 +165,16 @@ def decide_quality(args, scene, rt, window_size, frame_seconds):
     world = make_world(scene, rt, size=probe_size, spp=args.spp or 1, bounces=probe_bounces,
                        cells=probe_cells)
     stats, wall_ms = q.measure(world, frame_seconds)
+    traced = getattr(world, "caustics", "off") != "off"
     world.close()
     nx, ny = stats[-1].water_cells
     steps = sum(s.lbm_steps for s in stats) / len(stats)
     costs = q.costs_from_stats(stats, wall_ms, n_cells=nx * ny, steps=steps)
     return q.choose(costs, target_fps=args.target_fps, window=window_size, max_cells=max_cells,
                     max_bounces=max(max_bounces, 1), aspect=q.aspect_of(water.size),
-                    spp=args.spp or 1, base_cells=probe_cells, fixed_cells=args.cells,
-                    fixed_scale=args.scale, fixed_bounces=args.bounces)
+                    spp=args.spp or 1, base_cells=probe_cells, caustics=traced,
+                    fixed_cells=args.cells, fixed_scale=args.scale,
+                    fixed_bounces=args.bounces)
 
 
 # ---- event files ---------------------------------------------------------------------------
@@ -446,7 +450,9 @@ class Viewer:
                                  frame_time=frame_time or 1 / 60)
         self.path = display_path(rt, upload)
         self.world = make_world(scene, rt, size=image, spp=spp, bounces=bounces,
-                                cells=self.cells)
+                                cells=self.cells, caustics=quality.caustics)
+        if quality.caustics is False:
+            self.controls.caustics = "off"
         self.controls.reapply(self.world, camera=False)
         self.next_frame = 0       # index of the next frame to enqueue (event time base)
         self._size_seen = tuple(self.world.size)
@@ -583,7 +589,7 @@ class Viewer:
         size = scaled_size(c.window_size, self.quality.scale)
         self.world.close()
         self.world = make_world(self.scene, self.rt, size=size, spp=c.spp, bounces=c.bounces,
-                                cells=self.cells)
+                                cells=self.cells, caustics=False if c.caustics == "off" else None)
         c.image_size = tuple(self.world.size)
         c.water = water_of(self.scene, self.cells)
         c.reapply(self.world)
@@ -717,7 +723,7 @@ class Viewer:
     def event_log(self) -> EventLog:
         q = self.quality
         header = {"window": list(self._start_window), "cells": q.cells, "scale": q.scale,
-                  "bounces": q.bounces, "spp": self.controls.spp}
+                  "bounces": q.bounces, "caustics": q.caustics, "spp": self.controls.spp}
         return EventLog(header, list(self.recording or ()))
 
     def close(self) -> None:
@@ -743,7 +749,8 @@ def run(args) -> int:
     if replay is not None:
         h = replay.header
         window_size = tuple(h.get("window", window_size))
-        quality = q.Quality(int(h["cells"]), float(h["scale"]), int(h["bounces"]), "replayed")
+        quality = q.Quality(int(h["cells"]), float(h["scale"]), int(h["bounces"]), "replayed",
+                            caustics=h.get("caustics"))
         spp = int(h.get("spp", 1))
     else:
         quality = decide_quality(args, scene, rt, window_size, frame_seconds)
