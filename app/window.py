@@ -12,7 +12,8 @@ water along the drag; drag elsewhere orbits; right drag pans; the wheel zooms. K
 S screenshot, C caustics, H help, F2 HUD, F fullscreen, Esc quit.
 
 Quality: --quality auto (default) measures a few frames at start and picks the water grid,
-render scale and bounce depth that hold --target-fps; --quality low|medium|high fixes them;
+render scale, bounce depth and traced caustics (on/off) that hold --target-fps; --quality
+low|medium|high fixes them;
 --cells, --scale and --bounces pin their own part. Scripting: --frames N, --screenshot PATH,
 --record-events FILE and --events FILE (a deterministic replay: events at their frame indices,
 recorded frame times). Without a display it says so and exits with status 2: use `lbwater capture`.
