@@ -6,7 +6,8 @@ Per image size: the bare frame (World.frame: water, BVH, render, RGBA8 read-back
 upload it to a texture through a pixel buffer, draw the quad into a framebuffer of that size,
 glFinish), and the upload + draw alone. The goal (issue 11): the window's loop <= 1.1x the bare
 frame. Every size is checked in the same run: the drawn framebuffer must equal the frame's image
-exactly, else the run fails.
+exactly, else the run fails. Each row names the GL renderer: where EGL lists several devices
+(a GPU and Mesa's llvmpipe), ``GLCONTEXT_DEVICE_INDEX=N`` picks another one.
 """
 
 from __future__ import annotations
@@ -103,7 +104,7 @@ def run(args) -> int:
         row = {"device": world.device_name, "gl_renderer": ctx.info["GL_RENDERER"],
                "date": time.strftime("%Y-%m-%d"), "width": w, "height": h,
                "cells": f"{cells[0]}x{cells[1]}" if cells else "",
-               "upload": args.upload, "display_path": display_path(rt),
+               "upload": args.upload, "display_path": display_path(rt, args.upload),
                "bare_frame_ms": round(bare_ms, 3), "window_frame_ms": round(loop_ms, 3),
                "ratio": round(loop_ms / bare_ms, 3),
                "upload_draw_ms": round(_median_ms(upload), 3),

@@ -225,7 +225,7 @@ class Controls:
         self.rain_on = False
         self.rain_rate = RAIN_RATE_DEFAULT
         self._rain_dirty = False
-        self.caustics: bool | None = None  # None: the scene's [shading] caustics
+        self.caustics: str | None = None  # None: the world's own (the scene's) setting
         self.help_until = HELP_SECONDS   # seconds of wall time since the start
         self.show_hud = True
         self.message = ""
@@ -343,19 +343,29 @@ class Controls:
         elif a == Action.SCREENSHOT:
             r.screenshot = True
         elif a == Action.TOGGLE_CAUSTICS:
-            self.caustics = getattr(world, "caustics", "off") == "off"
-            setter = getattr(world, "set_caustics", None)
-            if setter is None:
-                self.say(now, "caustics are not in this build")
-            else:
-                setter(self.caustics)
-                self.say(now, f"caustics {'on' if self.caustics else 'off'}")
+            self._toggle_caustics(world, now)
         elif a == Action.TOGGLE_HELP:
             self.help_until = 0.0 if self.help_until > now else float("inf")
         elif a == Action.TOGGLE_HUD:
             self.show_hud = not self.show_hud
         elif a == Action.FULLSCREEN:
             r.fullscreen = True
+
+    def _toggle_caustics(self, world, now: float) -> None:
+        """C: traced caustics on or off, where the world has them."""
+        from app.errors import InputError
+
+        if not hasattr(world, "set_caustics"):
+            self.say(now, "caustics are not in this build")
+            return
+        mode = "off" if getattr(world, "caustics", "off") != "off" else "traced"
+        try:
+            world.set_caustics(mode)
+        except InputError as exc:
+            self.say(now, str(exc))
+            return
+        self.caustics = mode
+        self.say(now, f"caustics {mode}")
 
     def _drop_boat(self, world, now: float) -> None:
         """B: a boat falls from above the cursor, where the world has boats (a hook)."""
@@ -408,5 +418,5 @@ class Controls:
         rain and caustics; they reach it with the next :meth:`apply`."""
         self._camera_dirty = self._camera_dirty or camera
         self._rain_dirty = self.rain_on
-        if self.caustics is not None and hasattr(world, "set_caustics"):
+        if self.caustics is not None and getattr(world, "caustics", None) != self.caustics:
             world.set_caustics(self.caustics)

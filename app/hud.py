@@ -171,7 +171,7 @@ class Hud:
 # ---- what the HUD says (pure) -------------------------------------------------------------------
 def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
               quality: str = "", paused: bool = False, rain: float = 0.0, spp: int = 1,
-              bounces: int = 0, top: int = 6) -> list[str]:
+              bounces: int = 0, caustics: str = "", top: int = 6) -> list[str]:
     """The HUD's text from a FrameStats-like record (None before the first frame)."""
     lines = [f"{fps:5.1f} FPS" + ("  [paused]" if paused else "")
              + (f"  rain {rain:g}/s" if rain else "")]
@@ -180,7 +180,8 @@ def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
     w, h = size
     cells = getattr(stats, "water_cells", None)
     lines.append(f"{w}x{h}  {spp} spp  {bounces} bounces  "
-                 + (f"grid {cells[0]}x{cells[1]}" if cells else "no water"))
+                 + (f"grid {cells[0]}x{cells[1]}" if cells else "no water")
+                 + (f"  caustics {caustics}" if caustics else ""))
     lines.append(f"{stats.n_triangles:,} triangles  {stats.n_rays / 1e6:.2f} M rays/frame")
     ms = sorted(stats.stage_ms.items(), key=lambda kv: -kv[1])
     kernel = sum(v for _, v in ms)
@@ -195,18 +196,19 @@ def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
 
 
 def guard_lines(stats) -> list[str]:
-    """Warnings when the water solver had to act (clamped cells, NaN restored)."""
+    """Warnings when the water solver acted in the last frame (NaN restored, cells limited,
+    tau raised); the guard dict is the solver's ``stats()`` for that frame."""
     if stats is None or not stats.guard:
         return []
     g = stats.guard
     out = []
     if g.get("nan"):
-        out.append("water: NaN found, state restored")
-    n = int(g.get("cells_limited", 0) or 0)
+        out.append(f"water: non-finite values, checkpoint restored {g.get('restored', 0)}x")
+    n = int(g.get("clamped", 0) or 0)
     if n:
-        out.append(f"water: {n} cells clamped")
-    if g.get("volume_clipped"):
-        out.append(f"water: {g['volume_clipped']:.3g} m^3 clipped")
+        out.append(f"water: {n} cell updates limited (max Froude {g.get('max_froude', 0):.2f})")
+    if g.get("damped"):
+        out.append(f"water: viscosity raised (tau {g.get('tau', 0):.3f})")
     return out
 
 

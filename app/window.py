@@ -12,7 +12,8 @@ water along the drag; drag elsewhere orbits; right drag pans; the wheel zooms. K
 S screenshot, C caustics, H help, F2 HUD, F fullscreen, Esc quit.
 
 Quality: --quality auto (default) measures a few frames at start and picks the water grid,
-render scale and bounce depth that hold --target-fps; --quality low|medium|high fixes them;
+render scale, bounce depth and traced caustics (on/off) that hold --target-fps; --quality
+low|medium|high fixes them;
 --cells, --scale and --bounces pin their own part. Scripting: --frames N, --screenshot PATH,
 --record-events FILE and --events FILE (a deterministic replay: events at their frame indices,
 recorded frame times). Without a display it says so and exits with status 2: use `lbwater capture`.
@@ -117,21 +118,23 @@ def require_display() -> None:
 
 
 # ---- worlds -------------------------------------------------------------------------------------
-def make_world(scene, device, *, size, spp, bounces, cells):
-    """The World the window drives (docs/frame_api.md), ``cells`` along the pool's longer side."""
+def make_world(scene, device, *, size, spp, bounces, cells, caustics=None):
+    """The World the window drives (docs/frame_api.md), ``cells`` along the pool's longer side;
+    ``caustics`` False turns the scene's traced caustics off (None keeps the scene's)."""
     from app.world import World
 
     return World(scene, device, width=size[0], height=size[1], spp=spp, bounces=bounces,
-                 cells=None if scene.water is None else cells)
+                 cells=None if scene.water is None else cells,
+                 caustics="off" if caustics is False else None)
 
 
-def display_path(rt) -> str:
+def display_path(rt, upload: str = "pbo") -> str:
     """Which display path is used and why, for the HUD and the start line."""
-    exts = rt.device.extensions.split()
-    if "cl_khr_gl_sharing" in exts:
-        return ("copy (2 in flight, pixel-buffer upload); cl_khr_gl_sharing present but the "
+    how = "pixel-buffer" if upload == "pbo" else "direct"
+    if "cl_khr_gl_sharing" in rt.device.extensions.split():
+        return (f"copy (2 in flight, {how} upload); cl_khr_gl_sharing present but the "
                 "shared path is not implemented")
-    return "copy (2 in flight, pixel-buffer upload); no cl_khr_gl_sharing on this device"
+    return f"copy (2 in flight, {how} upload); no cl_khr_gl_sharing on this device"
 
 
 def water_of(scene, cells: int | None) -> Water | None:
@@ -166,14 +169,16 @@ def decide_quality(args, scene, rt, window_size, frame_seconds):
     world = make_world(scene, rt, size=probe_size, spp=args.spp or 1, bounces=probe_bounces,
                        cells=probe_cells)
     stats, wall_ms = q.measure(world, frame_seconds)
+    traced = getattr(world, "caustics", "off") != "off"
     world.close()
     nx, ny = stats[-1].water_cells
     steps = sum(s.lbm_steps for s in stats) / len(stats)
     costs = q.costs_from_stats(stats, wall_ms, n_cells=nx * ny, steps=steps)
     return q.choose(costs, target_fps=args.target_fps, window=window_size, max_cells=max_cells,
                     max_bounces=max(max_bounces, 1), aspect=q.aspect_of(water.size),
-                    spp=args.spp or 1, base_cells=probe_cells, fixed_cells=args.cells,
-                    fixed_scale=args.scale, fixed_bounces=args.bounces)
+                    spp=args.spp or 1, base_cells=probe_cells, caustics=traced,
+                    fixed_cells=args.cells, fixed_scale=args.scale,
+                    fixed_bounces=args.bounces)
 
 
 # ---- event files ---------------------------------------------------------------------------
@@ -213,6 +218,9 @@ class EventLog:
                 if rec.get("kind") != "header" or rec.get("version") != EVENTS_VERSION:
                     raise InputError(f"{path}:{n}: the first line must be the header "
                                      f"{{\"kind\": \"header\", \"version\": {EVENTS_VERSION}}}")
+                bad = [k for k in ("window", "cells", "scale", "bounces") if k not in rec]
+                if bad:
+                    raise InputError(f"{path}:{n}: the header lacks {', '.join(bad)}")
                 header = rec
                 continue
             kind = rec.get("kind")
@@ -444,11 +452,14 @@ class Viewer:
                                  water_of(scene, self.cells), spp=spp, bounces=bounces,
                                  cells=self.cells, window_size=logical, image_size=image,
                                  frame_time=frame_time or 1 / 60)
-        self.path = display_path(rt)
+        self.path = display_path(rt, upload)
         self.world = make_world(scene, rt, size=image, spp=spp, bounces=bounces,
-                                cells=self.cells)
+                                cells=self.cells, caustics=quality.caustics)
+        if quality.caustics is False:
+            self.controls.caustics = "off"
         self.controls.reapply(self.world, camera=False)
         self.next_frame = 0       # index of the next frame to enqueue (event time base)
+        self._size_seen = tuple(self.world.size)
         self.in_flight = 0
         self.shown = 0
         self.t0 = time.perf_counter()
@@ -582,7 +593,7 @@ class Viewer:
         size = scaled_size(c.window_size, self.quality.scale)
         self.world.close()
         self.world = make_world(self.scene, self.rt, size=size, spp=c.spp, bounces=c.bounces,
-                                cells=self.cells)
+                                cells=self.cells, caustics=False if c.caustics == "off" else None)
         c.image_size = tuple(self.world.size)
         c.water = water_of(self.scene, self.cells)
         c.reapply(self.world)
@@ -602,8 +613,12 @@ class Viewer:
         req = self.controls.apply(self.world)
         if req.fullscreen:
             self._toggle_fullscreen()
+        # a new window size rebuilds the World once it has held for a frame (a drag-resize
+        # does not rebuild at every step; meanwhile the image is stretched to the window)
         want = scaled_size(self.controls.window_size, self.quality.scale)
-        if req.rebuild or want != tuple(self.world.size):
+        resized = want != tuple(self.world.size) and want == self._size_seen
+        self._size_seen = want
+        if req.rebuild or resized:
             self._rebuild(**req.rebuild)
         more = limit is None or self.next_frame < limit
         if more and not req.quit:
@@ -652,7 +667,8 @@ class Viewer:
                               size=tuple(self.world.size), device=self.world.device_name,
                               quality=self.quality.describe(), paused=c.paused,
                               rain=c.rain_rate if c.rain_on else 0.0, spp=c.spp,
-                              bounces=c.bounces)
+                              bounces=c.bounces,
+                              caustics=str(getattr(self.world, "caustics", "") or ""))
             blocks.append((lines, 8, 8))
             warn = guard_lines(self.world.stats)
             if warn:
@@ -711,7 +727,7 @@ class Viewer:
     def event_log(self) -> EventLog:
         q = self.quality
         header = {"window": list(self._start_window), "cells": q.cells, "scale": q.scale,
-                  "bounces": q.bounces, "spp": self.controls.spp}
+                  "bounces": q.bounces, "caustics": q.caustics, "spp": self.controls.spp}
         return EventLog(header, list(self.recording or ()))
 
     def close(self) -> None:
@@ -742,12 +758,14 @@ def run(args) -> int:
     if replay is not None:
         h = replay.header
         window_size = tuple(h.get("window", window_size))
-        quality = q.Quality(int(h["cells"]), float(h["scale"]), int(h["bounces"]), "replayed")
+        quality = q.Quality(int(h["cells"]), float(h["scale"]), int(h["bounces"]), "replayed",
+                            caustics=h.get("caustics"))
         spp = int(h.get("spp", 1))
     else:
         quality = decide_quality(args, scene, rt, window_size, frame_seconds)
         spp = args.spp or (scene.render.spp if scene.render.spp in (1, 2, 4) else 1)
-    print(f"lbwater window: {rt.name}; {quality.describe()}; display {display_path(rt)}",
+    print(f"lbwater window: {rt.name}; {quality.describe()}; display "
+          f"{display_path(rt, args.upload)}",
           flush=True)
     viewer = Viewer(scene, rt, window_size=window_size, quality=quality, spp=spp,
                     frame_time=args.frame_time, vsync=not args.no_vsync, upload=args.upload,

@@ -2,6 +2,7 @@
 state machine against a recording fake world, the auto-quality choice, the event-file format and
 the HUD's text."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -177,14 +178,26 @@ def test_auto_quality_picks_smaller_settings_on_a_slower_device():
     # the choice is monotone in the device's speed
     picks = [choose(COSTS.scaled(f)) for f in (0.01, 0.1, 1, 10, 100)]
     rank = q.ladder(200, 5)
-    idx = [rank.index((p.cells, p.scale, p.bounces)) for p in picks]
+    idx = [rank.index((p.cells, p.scale, p.bounces, False)) for p in picks]
     assert idx == sorted(idx) and idx[0] == 0 and idx[-1] == len(rank) - 1
 
 
+def test_expensive_caustics_are_turned_off_before_the_picture_gets_coarse():
+    costs = dataclasses.replace(COSTS, caustics=900.0)   # PoCL's photons: 0.9 s a frame
+    pick = choose(costs, caustics=True)
+    assert pick.caustics is False and pick.scale >= 0.5 and pick.predicted_ms <= 50
+    cheap = choose(dataclasses.replace(COSTS, caustics=0.01), caustics=True, target_fps=1)
+    assert cheap.caustics is None                        # kept: the scene's setting
+    assert "caustics off" in pick.describe() and "caustics" not in cheap.describe()
+    assert q.preset("low", max_cells=200, max_bounces=5).caustics is False
+
+
 def test_ladder_rungs_never_cost_more_and_overrides_pin_their_part():
-    rungs = q.ladder(200, 5)
-    ms = [q.predict_ms(COSTS, cells=c, aspect=0.75, scale=s, bounces=b, window=(640, 360))
-          for c, s, b in rungs]
+    rungs = q.ladder(200, 5, caustics=True)
+    costs = dataclasses.replace(COSTS, caustics=5.0)
+    ms = [q.predict_ms(costs, cells=c, aspect=0.75, scale=s, bounces=b, window=(640, 360),
+                       caustics=k) for c, s, b, k in rungs]
+    assert rungs[0] == (200, 1.0, 5, True) and rungs[-1] == (32, 0.25, 1, False)
     assert all(b <= a for a, b in zip(ms, ms[1:], strict=False))
     pinned = choose(COSTS.scaled(100.0), fixed_scale=1.0, fixed_bounces=3)
     assert pinned.scale == 1.0 and pinned.bounces == 3 and "fixed" in pinned.source
@@ -194,13 +207,14 @@ def test_ladder_rungs_never_cost_more_and_overrides_pin_their_part():
 def test_costs_from_probe_stats_recover_the_units():
     class S:
         stage_ms = {"lbm.step": 4.0, "lbm.surface": 1.0, "bvh.blas.refit": 1.0,
-                    "render.trace": 10.0, "render.shade": 10.0}
+                    "render.trace": 10.0, "render.shade": 10.0, "caustics.photons": 3.0}
         n_rays = 1000
         rays_per_depth = (800, 200)
 
-    c = q.costs_from_stats([S, S], wall_ms=30.0, n_cells=100, steps=2)
+    c = q.costs_from_stats([S, S], wall_ms=33.0, n_cells=100, steps=2)
     assert c.per_cell_step == pytest.approx(0.02) and c.per_cell == pytest.approx(0.02)
     assert c.per_ray == pytest.approx(0.02) and c.fixed == pytest.approx(4.0)
+    assert c.caustics == pytest.approx(3.0)
     assert c.ray_ratio == pytest.approx((1.0, 0.25))
 
 
@@ -233,7 +247,7 @@ class Stats:
     stage_ms = {"render.trace": 3.0, "lbm.step": 1.25}
     n_rays, n_triangles, wall_ms = 2_500_000, 12345, 5.0
     water_cells = (32, 24)
-    guard = {"nan": False, "cells_limited": 7}
+    guard = {"nan": False, "clamped": 7, "max_froude": 0.91, "damped": 0}
 
 
 def test_hud_lines_show_fps_stages_grid_rays_device_and_guard_warnings():
@@ -242,7 +256,7 @@ def test_hud_lines_show_fps_stages_grid_rays_device_and_guard_warnings():
     for want in ("59.9 FPS", "render.trace\t3.000 ms", "grid 32x24", "12,345 triangles",
                  "2.50 M rays", "device: PoCL", "display: copy", "64x48"):
         assert want in text
-    assert guard_lines(Stats) == ["water: 7 cells clamped"]
+    assert guard_lines(Stats) == ["water: 7 cell updates limited (max Froude 0.91)"]
     assert hud_lines(None, fps=0, path="copy")[-1] == "display: copy"
     assert help_lines([("R", "rain")])[1] == "R\train"
 
