@@ -47,6 +47,7 @@ class Assembly:
     instances: dict                 #: instance id -> what it is ("water", "pool", mesh file)
     caustic_box: object | None = None  #: raytrace.caustics.PoolBox (a pool with water) or None
     boat_instances: list = dataclasses.field(default_factory=list)  #: [[boats]] instance ids
+    boats: object | None = None     #: lbm.bodies.Boats stepped with the water, or None
 
 
 def resized_water(water: WaterSpec, cells: int) -> WaterSpec:
@@ -213,11 +214,19 @@ def assemble(scene: Scene, rt, *, cells: int | None = None, water_steps: int | N
         if steps:
             sim.step(int(steps))
         surface = b.water(sim, water)
+    boats = None
+    if sim is not None and scene.boats:
+        # after every instance exists: the transform buffer no longer moves
+        from app.boats import boat_bodies, make_boats
+
+        sc = b.rs.scene
+        boats = make_boats(scene, sim, boat_bodies(scene), sc.transform_buffer,
+                           [sc.transform_row(i) for i in b.boat_instances])
     if not b.rs.meshes:
         raise InputError(f"{scene.path}: the scene has nothing to render (no [[meshes]], no "
                          "[water])")
     return Assembly(b.rs, sim, surface, b.instances, caustic_box(scene, water, b.instances),
-                    b.boat_instances)
+                    b.boat_instances, boats)
 
 
 def caustic_box(scene: Scene, water: WaterSpec | None, instances: dict):

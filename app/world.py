@@ -144,6 +144,7 @@ class World:
         a = assemble(scene, self.rt, cells=cells, water_steps=water_steps)
         self.render_scene, self.sim, self.water = a.render_scene, a.sim, a.water
         self.instances = a.instances
+        self.boats = a.boats  # lbm.bodies.Boats: stepped inside every water step (a step hook)
         self.rebuild_water_bvh = bool(rebuild_water_bvh)
         self.renderer = Renderer(self.rt, self.render_scene, render_settings(
             scene, width=width, height=height, spp=spp, bounces=bounces, aov=aov, seed=seed))
@@ -263,6 +264,29 @@ class World:
         self._caustics.set_mode(mode)
         self.renderer.set_caustics(self._caustics.map, self._caustics.view_params())
         self.caustics = mode
+
+    def drop_boat(self, x: float, y: float, height: float = 0.5, index: int = 0) -> None:
+        """Lift boat ``index`` to ``height`` m above the still water at pool point (x, y) m,
+        upright and at rest, to fall from there (the window's B key)."""
+        if self.boats is None or not self.boats.names:
+            raise InputError("drop_boat: the scene has no [[boats]]")
+        if not 0 <= index < len(self.boats.names):
+            raise InputError(f"drop_boat: boat {index} out of range [0, {len(self.boats.names)})")
+        w = self.scene.water
+        sx, sy = self.sim.size
+        if not (0 <= x <= sx and 0 <= y <= sy):
+            raise InputError(f"drop_boat: ({x:g}, {y:g}) m is outside the pool [0, {sx:g}] x "
+                             f"[0, {sy:g}] m")
+        ox, oy, oz = w.origin
+        self.drain()
+        self.boats.place(index, (ox + x, oy + w.depth + float(height), oz + y))
+
+    def boat_poses(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(positions (boats, 3) m, quaternions (boats, 4) w, x, y, z) now; a host read."""
+        if self.boats is None:
+            return None
+        self.drain()
+        return self.boats.poses()
 
     # -- facts ------------------------------------------------------------------------------
     @property

@@ -528,6 +528,19 @@ class Boats:
         b = self.rt.to_host(self.sim.bed_buffer, np.float32, n)
         return (z - b).reshape(self.sim.ny, self.sim.nx)
 
+    def place(self, index: int, position) -> None:
+        """Move boat ``index``'s centre of mass to ``position`` (world m), upright and at rest:
+        a boat dropped from above (the window's B key). A host round trip: not per frame."""
+        if not 0 <= index < len(self.names):
+            raise ValueError(f"place: boat index {index} out of range [0, {len(self.names)})")
+        self._sync_host()
+        k = self._slots[index]
+        self._host[k]["pos"][:3] = _finite3("position", position)
+        self._host[k]["quat"] = (1.0, 0.0, 0.0, 0.0)
+        self._host[k]["vel"][:3] = 0.0
+        self._host[k]["omega"][:3] = 0.0
+        cl.enqueue_copy(self.rt.queue, self._bodies, self._host)
+
     def set_velocity(self, index: int, velocity) -> None:
         """Set boat ``index``'s velocity (m/s): a push or a tow (a host round trip)."""
         self._sync_host()

@@ -123,8 +123,13 @@ def test_no_module_moves_host_bytes_around_the_counted_paths():
 
 # ---- per frame: the image and a few scalars --------------------------------------------------
 def test_pool_frames_move_only_the_image_and_scalars(rt):
-    """20 frames of scenes/pool.toml (the sailboat, rain on, a drop, a moving camera)."""
-    scene = load_scene(ROOT / "scenes" / "pool.toml")
+    """20 frames of scenes/pool.toml (the floating sailboat, caustics, rain on, a drop, a moving
+    camera)."""
+    from app.frames import with_shading
+
+    scene = with_shading(load_scene(ROOT / "scenes" / "pool.toml"),
+                         {"caustics": "traced", "caustic_photons": 4096})
+    assert scene.boats, "the pool floats a boat: its bodies stage runs in every frame"
     world = World(scene, rt, width=40, height=24, cells=40, water_steps=0)
     world.set_rain(20.0)
     world.frame(1 / 60)  # the first frame uploads tables and builds layouts
@@ -145,6 +150,8 @@ def test_pool_frames_move_only_the_image_and_scalars(rt):
     assert image <= per_frame <= image + 4096, (per_frame, c.calls[:12])
     assert max(scalars, default=0) <= 1024, "only scalars besides the image"
     assert world.stats.frame == 20 and world.stats.guard["nan"] is False
+    assert world.stats.stage_ms.get("lbm.bodies", 0) > 0
+    assert world.stats.stage_ms.get("caustics.photons", 0) > 0
 
 
 # ---- determinism -----------------------------------------------------------------------------
