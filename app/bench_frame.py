@@ -30,8 +30,44 @@ def add_arguments(p) -> None:
     p.add_argument("--warmup", type=int, default=5, help="untimed frames first")
     p.add_argument("--frame-time", type=float, default=1 / 60,
                    help="simulated seconds of water per frame")
+    p.add_argument("--caustics", choices=("off", "traced"),
+                   help="caustics mode (default: the scene's [shading] caustics)")
+    p.add_argument("--boats", type=int, metavar="N",
+                   help="float N copies of the scene's first [[boats]] (0.5 m, in a grid) to "
+                        "time the bodies stage; default: the scene's boats")
     p.add_argument("--rebuild", action="store_true",
                    help="rebuild the water BVH every frame instead of refitting it")
+
+
+def with_boats(scene, n: int):
+    """``scene`` floating ``n`` copies of its first boat, 0.5 m long, in a grid over the pool
+    (mass scaled with the volume, so they float at the same relative draft)."""
+    import dataclasses
+    import math
+
+    from app.errors import InputError
+
+    if not 0 <= n <= 16:
+        raise InputError(f"--boats {n} is out of range; allowed [0, 16]")
+    if n and not scene.boats:
+        raise InputError(f"{scene.path}: --boats needs a scene with a [[boats]] table to copy")
+    if n == 0:
+        return dataclasses.replace(scene, boats=())
+    b = scene.boats[0]
+    size = 0.5
+    k = (size / b.size) ** 3 if b.size > 0 else 1.0
+    cols = math.ceil(math.sqrt(n))
+    rows = math.ceil(n / cols)
+    sx, sy = scene.water.size
+    ox, oy, oz = scene.water.origin
+    boats = []
+    for i in range(n):
+        x = ox + sx * ((i % cols) + 0.5) / cols
+        z = oz + sy * ((i // cols) + 0.5) / rows
+        boats.append(dataclasses.replace(
+            b, size=size, position=(x, oy + scene.water.depth - 0.02, z),
+            mass=None if b.mass is None else b.mass * k))
+    return dataclasses.replace(scene, boats=tuple(boats))
 
 
 def run(args) -> int:
@@ -44,11 +80,13 @@ def run(args) -> int:
     scene = load_scene(args.scene)
     if scene.water is None:
         raise InputError(f"{args.scene}: bench frame needs a scene with [water]")
+    if args.boats is not None:
+        scene = with_boats(scene, args.boats)
     rt = get_runtime(args.device)
     rows = []
     for cells in args.cells:
         world = World(scene, rt, width=args.size[0], height=args.size[1], cells=cells,
-                      rebuild_water_bvh=args.rebuild)
+                      rebuild_water_bvh=args.rebuild, caustics=args.caustics)
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -88,7 +126,9 @@ def run(args) -> int:
                "water_triangles": 2 * (nx - 1) * (ny - 1),
                "triangles": st.n_triangles, "width": args.size[0],
                "height": args.size[1], "lbm_steps_per_frame": round(statistics.mean(steps), 3),
-               "bvh": "rebuild" if args.rebuild else "refit", "wall_ms": round(wall_ms, 3),
+               "bvh": "rebuild" if args.rebuild else "refit",
+               "caustics": args.caustics or "scene", "boats": len(scene.boats),
+               "wall_ms": round(wall_ms, 3),
                "latency_ms": round(statistics.median(latency) * 1e3, 3),
                "fps": round(1e3 / wall_ms, 1),
                "kernels_ms": round(sum(per_stage.values()), 3),
