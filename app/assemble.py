@@ -163,14 +163,13 @@ class _Builder:
     def water(self, sim, water: WaterSpec) -> WaterSurface:
         import lbm
 
-        rs, rt, pool = self.rs, self.rt, self.scene.pool
+        rs, pool = self.rs, self.scene.pool
         nx, ny = water.cells
-        vertices = rt.buffer(16 * nx * ny)
-        normals = rt.buffer(16 * nx * ny)
-        sim.write_surface(vertices, normals, water.origin)
         water_mat = self.material(pool.water_material if pool else "", WATER)
-        mesh = rs.add_mesh(vertices, lbm.grid_triangles(nx, ny), normals=normals,
-                           material=water_mat, dynamic=True, n_vertices=nx * ny)
+        # the solver writes the surface straight into the buffers the BVH and shader read
+        mesh, vertices, normals = rs.add_dynamic_mesh(nx * ny, lbm.grid_triangles(nx, ny),
+                                                      material=water_mat)
+        sim.write_surface(vertices, normals, water.origin)
         inst = rs.add_instance(mesh)
         self.instances[inst] = "water"
         if pool is not None:

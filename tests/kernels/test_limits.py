@@ -41,7 +41,6 @@ def test_lbm_refuses_32_bit_index_overflow_before_allocating(rt):
 
 def test_lbm_grid_larger_than_the_device_fails_with_the_estimate(rt):
     import lbm
-
     from lbm.limits import MAX_CELLS
 
     max_alloc = rt.device.max_mem_alloc_size
