@@ -135,7 +135,7 @@ typedef struct {
     uint scatter;       /* 1: scatter the rays' children into the next wavefront */
     uint q0;            /* first tile-order pixel of the chunk */
     uint n_q;           /* pixels of the chunk */
-    uint finish;        /* 1 on the chunk's last level: tonemap into the RGBA8 image */
+    uint finish;        /* 1: the tonemap pass after the chunk's last level (no rays) */
 } GatherParams;
 
 /* 32 bytes. Primary-hit outputs per pixel (sample 0 of the pixel). */

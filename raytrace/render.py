@@ -226,14 +226,16 @@ class Renderer:
                 depths.append((rnd(launch_n), (blocks * SCAN_WG,), rnd(nq)))
                 launch_n = min(self.capacity, 2 * launch_n)
             raygen = np.array([(q0, n_rays, int(q0 == 0), 0)], RAYGEN_PARAMS)[0]
-            # per level: the GatherParams while scattering and on the last level (finish)
+            # the GatherParams of a level that scatters, of the last level (accumulate only)
+            # and of the tonemap pass after it
             gather = (np.array([(1, q0, nq, 0)], GATHER_PARAMS)[0],
+                      np.array([(0, q0, nq, 0)], GATHER_PARAMS)[0],
                       np.array([(0, q0, nq, 1)], GATHER_PARAMS)[0])
             self._plan.append((raygen, gather, (max(n_rays, STATS_LEN),), depths))
 
     def _launch_sizes(self, depths: list, hint: tuple | None) -> list:
-        """Per depth level: (rays work-items, scan size, gather size scattering, gather size on
-        the last level). The per-ray kernels loop with a grid stride over the device-side count,
+        """Per depth level: (rays work-items, scan size, gather size over rays, tonemap size over
+        the chunk's pixels). The per-ray kernels loop with a grid stride over the device-side count,
         so any size is correct; with the last frame's counts (one chunk) a level is launched
         for 5/4 of them (at least 1/8 of its slots) instead of all its slots, which are mostly
         empty past depth 0 (reflections and refractions double the slots, not the rays)."""
@@ -247,7 +249,7 @@ class Renderer:
                 if d > 0 and hint is not None and d < len(hint):
                     want = max(hint[d] * 5 // 4 + ls, slots // 8)
                     n = min(slots, -(-want // ls) * ls)
-                sizes.append(((n,), scan, (max(n, pixels),), (pixels,)))
+                sizes.append(((n,), scan, (n,), (pixels,)))
             if len(self._sizes) > 64:
                 self._sizes.clear()
             self._sizes[key] = sizes
@@ -393,7 +395,8 @@ class Renderer:
         fused = s.fuse_trace_shade
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
         raygen = self.k_raygen
-        for rp, (gather_scatter, gather_finish), raygen_size, depths in self._plan:
+        for rp, (gather_scatter, gather_last, gather_finish), raygen_size, depths \
+                in self._plan:
             sizes = self._launch_sizes(depths, hint)
             raygen.bind(rp=rp)
             raygen.enqueue(raygen_size)
@@ -413,6 +416,8 @@ class Renderer:
                     g.bind(gp=gather_scatter)
                     g.enqueue(scatter_size, ls)
                 else:
+                    g.bind(gp=gather_last)
+                    g.enqueue(scatter_size, ls)
                     g.bind(gp=gather_finish)
                     g.enqueue(pixel_size, ls)
         self._stats_handle = self.enqueue_read_stats()
