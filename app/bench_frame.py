@@ -32,6 +32,9 @@ def add_arguments(p) -> None:
                    help="simulated seconds of water per frame")
     p.add_argument("--caustics", choices=("off", "traced"),
                    help="caustics mode (default: the scene's [shading] caustics)")
+    p.add_argument("--photons", type=int, metavar="N",
+                   help="caustic photons per frame per light (default: the scene's "
+                        "[shading] caustic_photons)")
     p.add_argument("--boats", type=int, metavar="N",
                    help="float N copies of the scene's first [[boats]] (0.5 m, in a grid) to "
                         "time the bodies stage; default: the scene's boats")
@@ -72,6 +75,7 @@ def with_boats(scene, n: int):
 
 def run(args) -> int:
     from app.errors import InputError
+    from app.frames import with_shading
     from app.io import write_csv, write_json
     from app.scene import load_scene
     from app.world import World
@@ -82,6 +86,10 @@ def run(args) -> int:
         raise InputError(f"{args.scene}: bench frame needs a scene with [water]")
     if args.boats is not None:
         scene = with_boats(scene, args.boats)
+    if args.photons is not None:
+        if not 1 <= args.photons <= 2**26:
+            raise InputError(f"--photons {args.photons} is out of range; allowed [1, {2**26}]")
+        scene = with_shading(scene, {"caustic_photons": args.photons})
     rt = get_runtime(args.device)
     rows = []
     for cells in args.cells:
@@ -128,6 +136,7 @@ def run(args) -> int:
                "height": args.size[1], "lbm_steps_per_frame": round(statistics.mean(steps), 3),
                "bvh": "rebuild" if args.rebuild else "refit",
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
+               "caustic_photons": scene.shading.caustic_photons,
                "wall_ms": round(wall_ms, 3),
                "latency_ms": round(statistics.median(latency) * 1e3, 3),
                "fps": round(1e3 / wall_ms, 1),

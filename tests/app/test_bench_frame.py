@@ -23,3 +23,14 @@ def test_bench_frame_needs_water(tmp_path, capsys):
     scene.write_text('[[meshes]]\nfile = "bunny_5k.obj"\n')
     assert main(["bench", "frame", "--scene", str(scene), "--out", str(tmp_path)]) == 2
     assert "needs a scene with [water]" in capsys.readouterr().err
+
+
+def test_bench_frame_photons_sets_the_caustic_photons_and_times_them(tmp_path, capsys):
+    out = tmp_path / "res"
+    assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
+                 "--warmup", "1", "--caustics", "traced", "--photons", "1024",
+                 "--out", str(out)]) == 0
+    r = json.loads((out / "bench_frame.json").read_text())[0]
+    assert r["caustic_photons"] == 1024 and r["caustics.photons_ms"] > 0
+    assert main(["bench", "frame", "--photons", "0", "--out", str(out)]) == 2
+    assert "--photons 0 is out of range" in capsys.readouterr().err
