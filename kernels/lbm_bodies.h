@@ -12,7 +12,7 @@
 #include "transform.h"
 
 /* Work-group size of lbm_bodies_step: one work-group per body (a power of two). */
-#define LBM_BODY_WG 256
+#define LBM_BODY_WG 512
 /* Most bodies (lbm/bodies.py MAX_BOATS): the pressure kernels stage them all in local memory. */
 #define LBM_MAX_BODIES 16
 

@@ -34,7 +34,7 @@ from lbm.structs import BODY_DTYPE, BODY_STEP_DTYPE, record
 #: kernels/lbm_bodies.h LBM_MAX_BODIES).
 MAX_BOATS = 16
 #: kernels/lbm_bodies.h LBM_BODY_WG.
-BODY_WG = 256
+BODY_WG = 512
 #: Work-group size of the pressure pass on a GPU.
 PRESS_WG = 64
 #: Most work-items the pressure pass gives one body (its box is strided beyond that).
