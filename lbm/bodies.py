@@ -291,14 +291,15 @@ class Boats:
     """Rigid floating bodies on ``sim`` (a :class:`lbm.ShallowWater`), stepped on the device.
 
     ``transform_buffer``: the scene's device transform buffer (rows of ``Transform`` in
-    kernels/transform.h, 48 bytes); boat k writes row ``rows[k]`` (world_from_mesh) every step,
+    kernels/transform.h, 48 bytes); boat k writes row ``rows[k]`` (world_from_mesh) every update,
     with no host copy. ``origin``: world position of the water grid's corner (as
     ``sim.write_surface``'s origin), so the water surface is at ``origin.y + bed + h``.
     ``rho``: water density (kg/m^3). ``coupled``: True (default) steps the boats inside
     ``sim.step(n)`` (a hook) every :attr:`every` water steps, ``every * dt <= max_substep``
     (every step where ``dt > max_substep``): the hulls' pressure is held at most
-    ``max_substep`` seconds (holding it for 0.1 s lagged the water's reaction and pumped energy
-    into a bobbing hull: measured, docs/lbm.md); False: the caller calls :meth:`enqueue_step`.
+    ``max_substep`` seconds of water time (holding it longer lags the water's reaction and
+    undamps a bobbing hull: measured, docs/lbm.md); False: the caller calls
+    :meth:`enqueue_step`. Poses are those of the last update.
     Building one reads the water's depth once (a host copy) to refuse boats that would touch
     the bed.
     """
