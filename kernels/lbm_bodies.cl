@@ -101,7 +101,7 @@ int4 lbm_body_box(const LbmParams p, const float4 origin, const float X, const f
 /* One work-item's share of the columns of ``body`` at its current pose: force, torque,
  * submerged volume, ring head sum and count added to acc. */
 void lbm_body_columns(__global const LBM_FT* f, __global const float* zforce, const LbmParams p,
-                      __global const float2* foot, const LbmBody* body, const LbmBodyStep* s,
+                      __global const float2* foot, const LbmBody* body, const LbmBodyStep s,
                       const int lid, float* acc)
 {
     float3 r0, r1, r2;
@@ -116,23 +116,23 @@ void lbm_body_columns(__global const LBM_FT* f, __global const float* zforce, co
         float H, uw, vw;
         if (col.y < col.x) {   /* a ring column: the water level around the hull */
             const float3 P = pos + lbm_rot(r0, r1, r2, (float3)(xb, 0.0f, zb));
-            lbm_water_at(f, zforce, p, s->origin, P.x, P.z, &H, &uw, &vw);
+            lbm_water_at(f, zforce, p, s.origin, P.x, P.z, &H, &uw, &vw);
             acc[7] += H;
             acc[8] += 1.0f;
             continue;
         }
         const float3 Pb = pos + lbm_rot(r0, r1, r2, (float3)(xb, col.x, zb));
         const float3 Pt = pos + lbm_rot(r0, r1, r2, (float3)(xb, col.y, zb));
-        lbm_water_at(f, zforce, p, s->origin, Pb.x, Pb.z, &H, &uw, &vw);
+        lbm_water_at(f, zforce, p, s.origin, Pb.x, Pb.z, &H, &uw, &vw);
         const float lo = fmin(Pb.y, Pt.y), hi = fmax(Pb.y, Pt.y);
         const float sub = clamp(H - lo, 0.0f, hi - lo);
         if (!(sub > 0.0f)) continue;
         const float vc = sub * dA;
         const float3 rel = (float3)(Pb.x, lo + 0.5f * sub, Pb.z) - pos;
         const float3 vp = vel + cross(omega, rel);
-        const float m_w = s->rho * vc;   /* displaced water, kg */
+        const float m_w = s.rho * vc;   /* displaced water, kg */
         const float3 F = (float3)(m_w * body->damping.y * (uw - vp.x),
-                                  m_w * (s->gravity - body->damping.x * vp.y),
+                                  m_w * (s.gravity - body->damping.x * vp.y),
                                   m_w * body->damping.y * (vw - vp.z));
         const float3 T = cross(rel, F);
         acc[0] += F.x;
@@ -148,15 +148,15 @@ void lbm_body_columns(__global const LBM_FT* f, __global const float* zforce, co
 /* One substep of dt for ``body`` under hydrodynamic force Fh, torque Th (about the centre of
  * mass) and submerged volume vol: semi-implicit Euler with added mass, the walls, the bed. */
 void lbm_body_integrate(LbmBody* body, const float3 Fh, const float3 Th, const float vol,
-                        const LbmBodyStep* s)
+                        const LbmBodyStep s)
 {
     float3 r0, r1, r2;
     lbm_quat_rows(body->quat, &r0, &r1, &r2);
     const float3 pos = body->pos.xyz, vel = body->vel.xyz, omega = body->omega.xyz;
     /* added mass in proportion to the part of the rest displacement under water (none in air) */
-    const float m = body->pos.w, dt = s->dt;
-    const float added = 1.0f + body->inertia.w * fmin(1.0f, vol * s->rho / m);
-    float3 v2 = vel + dt * (Fh / (m * added) - (float3)(0.0f, s->gravity / added, 0.0f));
+    const float m = body->pos.w, dt = s.dt;
+    const float added = 1.0f + body->inertia.w * fmin(1.0f, vol * s.rho / m);
+    float3 v2 = vel + dt * (Fh / (m * added) - (float3)(0.0f, s.gravity / added, 0.0f));
     const float3 I = body->inertia.xyz;
     float3 wb = lbm_rot_t(r0, r1, r2, omega);
     const float3 tb = lbm_rot_t(r0, r1, r2, Th) - cross(wb, I * wb);
@@ -168,17 +168,17 @@ void lbm_body_integrate(LbmBody* body, const float3 Fh, const float3 Th, const f
     q2 = normalize(q2);
     /* walls: the hull's bounding radius stays inside the box */
     const float r = body->damping.w;
-    const float lo_x = s->origin.x + r, hi_x = s->origin.x + s->size_x - r;
-    const float lo_z = s->origin.z + r, hi_z = s->origin.z + s->size_z - r;
+    const float lo_x = s.origin.x + r, hi_x = s.origin.x + s.size_x - r;
+    const float lo_z = s.origin.z + r, hi_z = s.origin.z + s.size_z - r;
     if (p2.x < lo_x) { p2.x = lo_x; v2.x = fmax(v2.x, 0.0f); }
     if (p2.x > hi_x) { p2.x = hi_x; v2.x = fmin(v2.x, 0.0f); }
     if (p2.z < lo_z) { p2.z = lo_z; v2.z = fmax(v2.z, 0.0f); }
     if (p2.z > hi_z) { p2.z = hi_z; v2.z = fmin(v2.z, 0.0f); }
     /* the bed: the hull's lowest point stays above the lowest bed (a grounded boat) */
-    const float floor_y = s->origin.y + s->floor + body->vel.w;
+    const float floor_y = s.origin.y + s.floor + body->vel.w;
     if (p2.y < floor_y) { p2.y = floor_y; v2.y = fmax(v2.y, 0.0f); }
-    if (lo_x > hi_x) p2.x = s->origin.x + 0.5f * s->size_x;
-    if (lo_z > hi_z) p2.z = s->origin.z + 0.5f * s->size_z;
+    if (lo_x > hi_x) p2.x = s.origin.x + 0.5f * s.size_x;
+    if (lo_z > hi_z) p2.z = s.origin.z + 0.5f * s.size_z;
     const int finite = all(isfinite(p2)) && all(isfinite(v2)) && all(isfinite(w2))
                        && all(isfinite(q2));
     if (finite) {
@@ -213,7 +213,7 @@ void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* re
         const LbmBody body = l_body;
         float acc[LBM_BODY_ACC];
         for (int k = 0; k < LBM_BODY_ACC; ++k) acc[k] = 0.0f;
-        lbm_body_columns(f, zforce, p, foot, &body, &s, lid, acc);
+        lbm_body_columns(f, zforce, p, foot, &body, s, lid, acc);
         for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] = acc[k];
         barrier(CLK_LOCAL_MEM_FENCE);
         for (int w = LBM_BODY_WG / 2; w > 0; w >>= 1) {
@@ -226,7 +226,7 @@ void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* re
             LbmBody next = body;
             lbm_body_integrate(&next, (float3)(l_acc[0][0], l_acc[1][0], l_acc[2][0]),
                                (float3)(l_acc[3][0], l_acc[4][0], l_acc[5][0]), l_acc[6][0],
-                               &s);
+                               s);
             l_body = next;
         }
         barrier(CLK_LOCAL_MEM_FENCE);
