@@ -1,15 +1,19 @@
 /* Floating rigid bodies coupled both ways with the shallow water (lbm/bodies.py, docs/lbm.md).
- * Per frame, no host copy:
+ * One bodies update is two launches for all bodies, no host copy:
  *
- *   lbm_bodies_step  x substeps   one work-group per body: sample the water under every footprint
- *                                 column (bilinear head H = bed + hull pressure + h and velocity),
- *                                 reduce buoyancy, drag, force and torque in local memory, then
- *                                 work-item 0 integrates the rigid body (semi-implicit Euler with
- *                                 added mass), stops it at the walls, writes its pose and its
- *                                 row of the transform buffer (world_from_mesh)
- *   lbm_bodies_press              one work-item per cell: zforce = bed + the hulls' pressure head,
- *                                 the "bed" the step kernel's force sees, so a hull pushes water
- *                                 away (a wake, waves) and conserves its volume exactly
+ *   lbm_bodies_step       one work-group per body, all substeps in the launch: sample the water
+ *                         under every footprint column (bilinear head H = bed + hull pressure + h
+ *                         and velocity), reduce buoyancy, drag, force and torque in local memory,
+ *                         then work-item 0 integrates the rigid body (semi-implicit Euler with
+ *                         added mass) and stops it at the walls; after the last substep it writes
+ *                         its pose, its row of the transform buffer (world_from_mesh) and the
+ *                         cell box its pressure head will cover (box; the previous one: box_old)
+ *   lbm_bodies_press      per_body work-items per body, each striding over the cells of its
+ *                         box and box_old (a cell in several boxes: the lowest body's):
+ *                         zforce = bed + the hulls' pressure head, the "bed" the step kernel's
+ *                         force sees, so a hull pushes water away (a wake, waves) and conserves
+ *                         its volume exactly; cells of box_old that left the hull get the bed back
+ *   lbm_bodies_press_all  the same over every cell (when boats are added or dropped)
  *
  * Hydrostatics: the pressure under a hull column whose bottom is at Y_b is rho g (H - Y_b), H the
  * water's head there; the hull presses on the water with the head d = clamp(L - Y_b, 0, Y_t - Y_b),
@@ -82,28 +86,33 @@ float3 lbm_rot_t(const float3 r0, const float3 r1, const float3 r2, const float3
 
 #define LBM_BODY_ACC 9   /* force (3), torque (3), submerged volume, ring head sum, ring count */
 
-__kernel __attribute__((reqd_work_group_size(LBM_BODY_WG, 1, 1)))
-void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* restrict zforce,
-                     const LbmParams p, __global const float2* restrict foot,
-                     __global LbmBody* bodies, __global Transform* transforms,
-                     const LbmBodyStep s)
+/* Cells whose centres may lie within r of (X, Z), one cell of margin, clamped to the grid
+ * (never empty): (i0, j0, i1, j1) inclusive. */
+int4 lbm_body_box(const LbmParams p, const float4 origin, const float X, const float Z,
+                  const float r)
 {
-    __local float l_acc[LBM_BODY_ACC][LBM_BODY_WG];
-    const int b = get_group_id(0), lid = get_local_id(0);
-    if (b >= s.n_bodies) return;   /* uniform over the work-group */
-    LbmBody body = bodies[b];
-    if (body.flags.x == 0) return;
+    const float gx0 = (X - r - origin.x) / p.dx - 0.5f, gx1 = (X + r - origin.x) / p.dx - 0.5f;
+    const float gz0 = (Z - r - origin.z) / p.dx - 0.5f, gz1 = (Z + r - origin.z) / p.dx - 0.5f;
+    const int4 b = (int4)((int)floor(gx0) - 1, (int)floor(gz0) - 1, (int)ceil(gx1) + 1,
+                          (int)ceil(gz1) + 1);
+    return clamp(b, (int4)(0), (int4)(p.nx - 1, p.ny - 1, p.nx - 1, p.ny - 1));
+}
+
+/* One work-item's share of the columns of ``body`` at its current pose: force, torque,
+ * submerged volume, ring head sum and count added to acc. */
+void lbm_body_columns(__global const LBM_FT* f, __global const float* zforce, const LbmParams p,
+                      __global const float2* foot, const LbmBody* body, const LbmBodyStep s,
+                      const int lid, float* acc)
+{
     float3 r0, r1, r2;
-    lbm_quat_rows(body.quat, &r0, &r1, &r2);
-    const float3 pos = body.pos.xyz, vel = body.vel.xyz, omega = body.omega.xyz;
-    const int nfx = body.foot_n.x, n_s = body.foot_n.x * body.foot_n.y;
-    const float dA = body.foot.z * body.foot.w * fabs(r1.y);  /* column area seen from above */
-    float acc[LBM_BODY_ACC];
-    for (int k = 0; k < LBM_BODY_ACC; ++k) acc[k] = 0.0f;
+    lbm_quat_rows(body->quat, &r0, &r1, &r2);
+    const float3 pos = body->pos.xyz, vel = body->vel.xyz, omega = body->omega.xyz;
+    const int nfx = body->foot_n.x, n_s = body->foot_n.x * body->foot_n.y;
+    const float dA = body->foot.z * body->foot.w * fabs(r1.y);  /* column area seen from above */
     for (int k = lid; k < n_s; k += LBM_BODY_WG) {
-        const float2 col = foot[body.foot_n.z + k];
-        const float xb = body.foot.x + (float)(k % nfx) * body.foot.z;
-        const float zb = body.foot.y + (float)(k / nfx) * body.foot.w;
+        const float2 col = foot[body->foot_n.z + k];
+        const float xb = body->foot.x + (float)(k % nfx) * body->foot.z;
+        const float zb = body->foot.y + (float)(k / nfx) * body->foot.w;
         float H, uw, vw;
         if (col.y < col.x) {   /* a ring column: the water level around the hull */
             const float3 P = pos + lbm_rot(r0, r1, r2, (float3)(xb, 0.0f, zb));
@@ -122,9 +131,9 @@ void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* re
         const float3 rel = (float3)(Pb.x, lo + 0.5f * sub, Pb.z) - pos;
         const float3 vp = vel + cross(omega, rel);
         const float m_w = s.rho * vc;   /* displaced water, kg */
-        const float3 F = (float3)(m_w * body.damping.y * (uw - vp.x),
-                                  m_w * (s.gravity - body.damping.x * vp.y),
-                                  m_w * body.damping.y * (vw - vp.z));
+        const float3 F = (float3)(m_w * body->damping.y * (uw - vp.x),
+                                  m_w * (s.gravity - body->damping.x * vp.y),
+                                  m_w * body->damping.y * (vw - vp.z));
         const float3 T = cross(rel, F);
         acc[0] += F.x;
         acc[1] += F.y;
@@ -134,33 +143,31 @@ void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* re
         acc[5] += T.z;
         acc[6] += vc;
     }
-    for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] = acc[k];
-    barrier(CLK_LOCAL_MEM_FENCE);
-    for (int w = LBM_BODY_WG / 2; w > 0; w >>= 1) {
-        if (lid < w) {
-            for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] += l_acc[k][lid + w];
-        }
-        barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid != 0) return;
+}
 
-    /* -- integrate (semi-implicit Euler, added mass) ---------------------------------------- */
-    const float3 Fh = (float3)(l_acc[0][0], l_acc[1][0], l_acc[2][0]);
-    const float3 Th = (float3)(l_acc[3][0], l_acc[4][0], l_acc[5][0]);
+/* One substep of dt for ``body`` under hydrodynamic force Fh, torque Th (about the centre of
+ * mass) and submerged volume vol: semi-implicit Euler with added mass, the walls, the bed. */
+void lbm_body_integrate(LbmBody* body, const float3 Fh, const float3 Th, const float vol,
+                        const LbmBodyStep s)
+{
+    float3 r0, r1, r2;
+    lbm_quat_rows(body->quat, &r0, &r1, &r2);
+    const float3 pos = body->pos.xyz, vel = body->vel.xyz, omega = body->omega.xyz;
     /* added mass in proportion to the part of the rest displacement under water (none in air) */
-    const float m = body.pos.w, dt = s.dt;
-    const float added = 1.0f + body.inertia.w * fmin(1.0f, l_acc[6][0] * s.rho / m);
+    const float m = body->pos.w, dt = s.dt;
+    const float added = 1.0f + body->inertia.w * fmin(1.0f, vol * s.rho / m);
     float3 v2 = vel + dt * (Fh / (m * added) - (float3)(0.0f, s.gravity / added, 0.0f));
-    const float3 I = body.inertia.xyz;
+    const float3 I = body->inertia.xyz;
     float3 wb = lbm_rot_t(r0, r1, r2, omega);
     const float3 tb = lbm_rot_t(r0, r1, r2, Th) - cross(wb, I * wb);
-    wb = (wb + dt * tb / (I * added)) / (1.0f + dt * body.damping.z);
+    wb = (wb + dt * tb / (I * added)) / (1.0f + dt * body->damping.z);
     const float3 w2 = lbm_rot(r0, r1, r2, wb);
     float3 p2 = pos + dt * v2;
-    float4 q2 = body.quat + 0.5f * dt * lbm_quat_mul((float4)(0.0f, w2.x, w2.y, w2.z), body.quat);
+    float4 q2 = body->quat + 0.5f * dt * lbm_quat_mul((float4)(0.0f, w2.x, w2.y, w2.z),
+                                                      body->quat);
     q2 = normalize(q2);
     /* walls: the hull's bounding radius stays inside the box */
-    const float r = body.damping.w;
+    const float r = body->damping.w;
     const float lo_x = s.origin.x + r, hi_x = s.origin.x + s.size_x - r;
     const float lo_z = s.origin.z + r, hi_z = s.origin.z + s.size_z - r;
     if (p2.x < lo_x) { p2.x = lo_x; v2.x = fmax(v2.x, 0.0f); }
@@ -168,26 +175,70 @@ void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* re
     if (p2.z < lo_z) { p2.z = lo_z; v2.z = fmax(v2.z, 0.0f); }
     if (p2.z > hi_z) { p2.z = hi_z; v2.z = fmin(v2.z, 0.0f); }
     /* the bed: the hull's lowest point stays above the lowest bed (a grounded boat) */
-    const float floor_y = s.origin.y + s.floor + body.vel.w;
+    const float floor_y = s.origin.y + s.floor + body->vel.w;
     if (p2.y < floor_y) { p2.y = floor_y; v2.y = fmax(v2.y, 0.0f); }
     if (lo_x > hi_x) p2.x = s.origin.x + 0.5f * s.size_x;
     if (lo_z > hi_z) p2.z = s.origin.z + 0.5f * s.size_z;
     const int finite = all(isfinite(p2)) && all(isfinite(v2)) && all(isfinite(w2))
                        && all(isfinite(q2));
     if (finite) {
-        body.pos.xyz = p2;
-        body.vel.xyz = v2;   /* vel.w: the keel depth, kept */
-        body.omega.xyz = w2;
-        body.quat = q2;
+        body->pos.xyz = p2;
+        body->vel.xyz = v2;   /* vel.w: the keel depth, kept */
+        body->omega.xyz = w2;
+        body->quat = q2;
     } else {   /* keep the pose, stop the body: never a NaN in a transform */
-        body.vel.xyz = (float3)(0.0f);
-        body.omega.xyz = (float3)(0.0f);
+        body->vel.xyz = (float3)(0.0f);
+        body->omega.xyz = (float3)(0.0f);
     }
-    body.force = (float4)(Fh, l_acc[6][0]);
-    body.torque.xyz = Th;   /* torque.w: the still-water level, set by the host */
+    body->force = (float4)(Fh, vol);
+    body->torque.xyz = Th;   /* torque.w: the still-water level, set by the host */
+}
+
+/* s.n_sub substeps of s.dt for every body: one work-group per body. The water does not change
+ * between substeps (it is the water of this moment); the pose does. */
+__kernel __attribute__((reqd_work_group_size(LBM_BODY_WG, 1, 1)))
+void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* restrict zforce,
+                     const LbmParams p, __global const float2* restrict foot,
+                     __global LbmBody* bodies, __global Transform* transforms,
+                     const LbmBodyStep s)
+{
+    __local float l_acc[LBM_BODY_ACC][LBM_BODY_WG];
+    __local LbmBody l_body;
+    const int b = get_group_id(0), lid = get_local_id(0);
+    if (b >= s.n_bodies) return;   /* uniform over the work-group */
+    if (lid == 0) l_body = bodies[b];
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (l_body.flags.x == 0) return;   /* uniform */
+    for (int sub = 0; sub < s.n_sub; ++sub) {
+        const LbmBody body = l_body;
+        float acc[LBM_BODY_ACC];
+        for (int k = 0; k < LBM_BODY_ACC; ++k) acc[k] = 0.0f;
+        lbm_body_columns(f, zforce, p, foot, &body, s, lid, acc);
+        for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] = acc[k];
+        barrier(CLK_LOCAL_MEM_FENCE);
+        for (int w = LBM_BODY_WG / 2; w > 0; w >>= 1) {
+            if (lid < w) {
+                for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] += l_acc[k][lid + w];
+            }
+            barrier(CLK_LOCAL_MEM_FENCE);
+        }
+        if (lid == 0) {
+            LbmBody next = body;
+            lbm_body_integrate(&next, (float3)(l_acc[0][0], l_acc[1][0], l_acc[2][0]),
+                               (float3)(l_acc[3][0], l_acc[4][0], l_acc[5][0]), l_acc[6][0],
+                               s);
+            l_body = next;
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid != 0) return;
+    LbmBody body = l_body;
+    body.box_old = body.box;
+    body.box = lbm_body_box(p, s.origin, body.pos.x, body.pos.z, body.damping.w);
     bodies[b] = body;
 
     /* world_from_mesh = [R | pos] . body_from_mesh */
+    float3 r0, r1, r2;
     lbm_quat_rows(body.quat, &r0, &r1, &r2);
     const float3 c0 = (float3)(body.base_r0.x, body.base_r1.x, body.base_r2.x);
     const float3 c1 = (float3)(body.base_r0.y, body.base_r1.y, body.base_r2.y);
@@ -200,37 +251,112 @@ void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* re
     transforms[body.foot_n.w] = t;
 }
 
-/* zforce = bed + the pressure head of every hull over the cell. Launch: 2D over (nx, ny). */
-__kernel void lbm_bodies_press(__global const float* restrict bed, __global float* zforce,
-                               const LbmParams p, __global const float2* restrict foot,
-                               __global const LbmBody* restrict bodies, const LbmBodyStep s)
+/* What the pressure kernels need of a body, staged in local memory once per work-group. */
+typedef struct {
+    float4 pos;        /* centre of mass, m; w: bounding radius, m */
+    float4 r0, r1, r2; /* world_from_body rows; r0.w: the still-water level L, m */
+    float4 foot;       /* x0, z0, dfx, dfz */
+    int4 n;            /* nfx, nfz, footprint offset, active */
+    int4 box;          /* cells of box and box_old: the bounding rectangle of both */
+} LbmPressBody;
+
+/* Stage bodies[0, n) in l_b (every work-item of the group calls it: it ends in a barrier). */
+void lbm_stage_bodies(__local LbmPressBody* l_b, __global const LbmBody* bodies, const int n)
 {
-    const int i = get_global_id(0), j = get_global_id(1);
-    if (i >= p.nx || j >= p.ny) return;
-    const int n = LBM_CELL(p, i, j);
-    const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
-    const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
-    float d = 0.0f;
-    for (int b = 0; b < s.n_bodies; ++b) {
-        const LbmBody body = bodies[b];
-        if (body.flags.x == 0) continue;
-        const float dxw = X - body.pos.x, dzw = Z - body.pos.z, r = body.damping.w;
-        if (dxw * dxw + dzw * dzw > r * r) continue;
+    const int lid = get_local_id(0) + get_local_id(1) * get_local_size(0);
+    const int ls = get_local_size(0) * get_local_size(1);
+    for (int b = lid; b < n; b += ls) {
+        const LbmBody B = bodies[b];
         float3 r0, r1, r2;
-        lbm_quat_rows(body.quat, &r0, &r1, &r2);
-        const float L = body.torque.w;
-        const float3 loc = lbm_rot_t(r0, r1, r2, (float3)(dxw, L - body.pos.y, dzw));
-        const int ix = (int)round((loc.x - body.foot.x) / body.foot.z);
-        const int iz = (int)round((loc.z - body.foot.y) / body.foot.w);
-        if (ix < 0 || iz < 0 || ix >= body.foot_n.x || iz >= body.foot_n.y) continue;
-        const float2 col = foot[body.foot_n.z + iz * body.foot_n.x + ix];
+        lbm_quat_rows(B.quat, &r0, &r1, &r2);
+        LbmPressBody o;
+        o.pos = (float4)(B.pos.xyz, B.damping.w);
+        o.r0 = (float4)(r0, B.torque.w);
+        o.r1 = (float4)(r1, 0.0f);
+        o.r2 = (float4)(r2, 0.0f);
+        o.foot = B.foot;
+        o.n = (int4)(B.foot_n.x, B.foot_n.y, B.foot_n.z, B.flags.x);
+        o.box = (int4)(min(B.box.x, B.box_old.x), min(B.box.y, B.box_old.y),
+                       max(B.box.z, B.box_old.z), max(B.box.w, B.box_old.w));
+        l_b[b] = o;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+}
+
+/* The hulls' pressure head (m) at world (X, Z): per hull over it, clamp(L - Y_b, 0, Y_t - Y_b)
+ * of its nearest footprint column. */
+float lbm_hull_head(__local const LbmPressBody* l_b, const int n,
+                    __global const float2* restrict foot, const float X, const float Z)
+{
+    float d = 0.0f;
+    for (int b = 0; b < n; ++b) {
+        if (l_b[b].n.w == 0) continue;
+        const float4 pos = l_b[b].pos;
+        const float dxw = X - pos.x, dzw = Z - pos.z;
+        if (dxw * dxw + dzw * dzw > pos.w * pos.w) continue;
+        const float3 r0 = l_b[b].r0.xyz, r1 = l_b[b].r1.xyz, r2 = l_b[b].r2.xyz;
+        const float L = l_b[b].r0.w;
+        const float4 fp = l_b[b].foot;
+        const int4 fn = l_b[b].n;
+        const float3 loc = lbm_rot_t(r0, r1, r2, (float3)(dxw, L - pos.y, dzw));
+        const int ix = (int)round((loc.x - fp.x) / fp.z);
+        const int iz = (int)round((loc.z - fp.y) / fp.w);
+        if (ix < 0 || iz < 0 || ix >= fn.x || iz >= fn.y) continue;
+        const float2 col = foot[fn.z + iz * fn.x + ix];
         if (col.y < col.x) continue;
-        const float xc = body.foot.x + (float)ix * body.foot.z;
-        const float zc = body.foot.y + (float)iz * body.foot.w;
-        const float yb = body.pos.y + dot(r1, (float3)(xc, col.x, zc));
-        const float yt = body.pos.y + dot(r1, (float3)(xc, col.y, zc));
+        const float xc = fp.x + (float)ix * fp.z;
+        const float zc = fp.y + (float)iz * fp.w;
+        const float yb = pos.y + dot(r1, (float3)(xc, col.x, zc));
+        const float yt = pos.y + dot(r1, (float3)(xc, col.y, zc));
         const float lo = fmin(yb, yt), hi = fmax(yb, yt);
         d += clamp(L - lo, 0.0f, hi - lo);
     }
-    zforce[n] = bed[n] + d;
+    return d;
+}
+
+/* zforce = bed + the hulls' pressure head over the cells of each body's box and box_old (its
+ * previous box: cells the hull left get the bed back). 1D launch: per_body work-items for body
+ * b = gid / per_body, striding over its cells; a cell in several boxes is the lowest body's. */
+__kernel void lbm_bodies_press(__global const float* restrict bed, __global float* zforce,
+                               const LbmParams p, __global const float2* restrict foot,
+                               __global const LbmBody* restrict bodies, const LbmBodyStep s,
+                               const int per_body)
+{
+    __local LbmPressBody l_b[LBM_MAX_BODIES];
+    const int n = min(s.n_bodies, LBM_MAX_BODIES);
+    lbm_stage_bodies(l_b, bodies, n);
+    const int gid = get_global_id(0);
+    const int b = gid / per_body, k0 = gid - b * per_body;
+    if (b >= n || l_b[b].n.w == 0) return;
+    const int4 box = l_b[b].box;
+    const int w = box.z - box.x + 1, area = w * (box.w - box.y + 1);
+    for (int c = k0; c < area; c += per_body) {
+        const int i = box.x + c % w, j = box.y + c / w;
+        int mine = 1;
+        for (int o = 0; o < b; ++o) {
+            const int4 ob = l_b[o].box;
+            if (l_b[o].n.w != 0 && i >= ob.x && i <= ob.z && j >= ob.y && j <= ob.w) mine = 0;
+        }
+        if (!mine) continue;
+        const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
+        const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
+        const int cell = LBM_CELL(p, i, j);
+        zforce[cell] = bed[cell] + lbm_hull_head(l_b, n, foot, X, Z);
+    }
+}
+
+/* zforce = bed + the hulls' pressure head on every cell. Launch: 2D over (nx, ny). */
+__kernel void lbm_bodies_press_all(__global const float* restrict bed, __global float* zforce,
+                                   const LbmParams p, __global const float2* restrict foot,
+                                   __global const LbmBody* restrict bodies, const LbmBodyStep s)
+{
+    __local LbmPressBody l_b[LBM_MAX_BODIES];
+    const int n = min(s.n_bodies, LBM_MAX_BODIES);
+    lbm_stage_bodies(l_b, bodies, n);
+    const int i = get_global_id(0), j = get_global_id(1);
+    if (i >= p.nx || j >= p.ny) return;
+    const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
+    const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
+    const int cell = LBM_CELL(p, i, j);
+    zforce[cell] = bed[cell] + lbm_hull_head(l_b, n, foot, X, Z);
 }

@@ -12,9 +12,11 @@
 #include "transform.h"
 
 /* Work-group size of lbm_bodies_step: one work-group per body (a power of two). */
-#define LBM_BODY_WG 128
+#define LBM_BODY_WG 512
+/* Most bodies (lbm/bodies.py MAX_BOATS): the pressure kernels stage them all in local memory. */
+#define LBM_MAX_BODIES 16
 
-/* 224 bytes: one rigid body, its hull footprint and its transform row. */
+/* 256 bytes: one rigid body, its hull footprint and its transform row. */
 typedef struct {
     float4 pos;      /* centre of mass in world coordinates, m; w: mass, kg */
     float4 quat;     /* world_from_body rotation as (w, x, y, z) in (x, y, z, w) */
@@ -35,6 +37,10 @@ typedef struct {
     int4 foot_n;     /* nfx, nfz, offset of the first column in the footprint array, row of
                         the transform buffer this body writes */
     int4 flags;      /* x: 1 active; y, z, w: unused */
+    int4 box;        /* cells (i0, j0, i1, j1), inclusive, holding the bounding circle of the
+                        pose the next pressure pass presses, one cell of margin (set by the
+                        bodies step) */
+    int4 box_old;    /* the box of the pose pressed before: the pressure pass restores it */
 } LbmBody;
 
 /* 48 bytes: one bodies step, by value. */
@@ -47,7 +53,7 @@ typedef struct {
     float size_x;    /* extent of the water box along world x and z, m (walls) */
     float size_z;
     float floor;     /* lowest bed height, m above origin.y: no hull goes below it */
-    int pad0;
+    int n_sub;       /* substeps of dt in one launch of lbm_bodies_step */
 } LbmBodyStep;
 
 #endif

@@ -4,16 +4,19 @@ Host side of ``kernels/lbm_bodies.cl``. The host precomputes, once per hull, a c
 description from the closed mesh (:class:`Hull`): volume, centre of mass and principal moments of
 a uniform solid, and a footprint height map (where the hull crosses vertical lines on a small grid
 in body coordinates, ringed by empty columns that measure the water level around the hull).
-Per frame, :meth:`Boats.enqueue_step` only enqueues: the bodies kernel (one work-group per boat:
-buoyancy and drag from the water under every column, a local reduction to force and torque, then
-semi-implicit Euler with added mass, walls, and the pose written into the caller's transform
-buffer as world_from_mesh), then the pressure kernel (the hulls' pressure head added to the bed
-the step's force sees: the hull pushes water away, so a moving boat makes a wake and a heaving
-one makes waves; water volume is conserved exactly). See docs/lbm.md, "Floating bodies".
+:meth:`Boats.enqueue_step` only enqueues two launches for all boats: the bodies kernel (one
+work-group per boat, every substep in the launch: buoyancy and drag from the water under every
+column, a local reduction to force and torque, then semi-implicit Euler with added mass, walls,
+and the pose written into the caller's transform buffer as world_from_mesh), then the pressure
+kernel over the cells of the hulls' boxes only (the hulls' pressure head added to the bed the
+step's force sees: the hull pushes water away, so a moving boat makes a wake and a heaving one
+makes waves; water volume is conserved exactly). Coupled to ``sim.step``, the boats are updated
+every :attr:`Boats.every` water steps, at most ``max_substep`` seconds apart (the coupling lag is
+bounded in time, not in steps). See docs/lbm.md, "Floating bodies".
 
     boats = Boats(sim, [BoatSpec(V, F, mass=100.0, position=(1, 0.55, 1))],
                   transform_buffer, rows=[3], origin=(0, 0, 0))
-    sim.step(k); boats.enqueue_step(k * sim.dt)     # per frame, no host sync
+    sim.step(k)                                     # coupled: boats follow, no host sync
     positions, quaternions = boats.poses()          # a host read, for tests and saving
 """
 
@@ -27,10 +30,15 @@ import pyopencl as cl
 
 from lbm.structs import BODY_DTYPE, BODY_STEP_DTYPE, record
 
-#: Most boats one :class:`Boats` holds (the device array is allocated once at this size).
+#: Most boats one :class:`Boats` holds (the device array is allocated once at this size;
+#: kernels/lbm_bodies.h LBM_MAX_BODIES).
 MAX_BOATS = 16
 #: kernels/lbm_bodies.h LBM_BODY_WG.
-BODY_WG = 128
+BODY_WG = 512
+#: Work-group size of the pressure pass on a GPU.
+PRESS_WG = 64
+#: Most work-items the pressure pass gives one body (its box is strided beyond that).
+PRESS_MAX_PER_BODY = 1 << 16
 RHO_WATER = 1000.0
 
 
@@ -283,13 +291,15 @@ class Boats:
     """Rigid floating bodies on ``sim`` (a :class:`lbm.ShallowWater`), stepped on the device.
 
     ``transform_buffer``: the scene's device transform buffer (rows of ``Transform`` in
-    kernels/transform.h, 48 bytes); boat k writes row ``rows[k]`` (world_from_mesh) every step,
+    kernels/transform.h, 48 bytes); boat k writes row ``rows[k]`` (world_from_mesh) every update,
     with no host copy. ``origin``: world position of the water grid's corner (as
     ``sim.write_surface``'s origin), so the water surface is at ``origin.y + bed + h``.
-    ``rho``: water density (kg/m^3). ``coupled``: True (default) steps the boats after every
-    water step of ``sim.step(n)`` (a hook), so the hulls' pressure follows the water step by
-    step (holding it over several water steps lags the water's reaction and pumps energy into a
-    bobbing hull: measured, docs/lbm.md); False: the caller calls :meth:`enqueue_step`.
+    ``rho``: water density (kg/m^3). ``coupled``: True (default) steps the boats inside
+    ``sim.step(n)`` (a hook) every :attr:`every` water steps, ``every * dt <= max_substep``
+    (every step where ``dt > max_substep``): the hulls' pressure is held at most
+    ``max_substep`` seconds of water time (holding it longer lags the water's reaction and
+    undamps a bobbing hull: measured, docs/lbm.md); False: the caller calls
+    :meth:`enqueue_step`. Poses are those of the last update.
     Building one reads the water's depth once (a host copy) to refuse boats that would touch
     the bed.
     """
@@ -303,6 +313,8 @@ class Boats:
         if not (self.rho > 0 and math.isfinite(self.rho)):
             raise ValueError(f"rho={rho!r} must be a positive density (kg/m^3)")
         self.max_substep = float(max_substep)
+        if not (self.max_substep > 0 and math.isfinite(self.max_substep)):
+            raise ValueError(f"max_substep={max_substep!r} must be a positive time (s)")
         if not isinstance(transform_buffer, cl.Buffer):
             raise ValueError("transform_buffer must be a pyopencl Buffer of Transform rows")
         self.transforms = transform_buffer
@@ -318,6 +330,11 @@ class Boats:
                                                stage="lbm.bodies", defines=defines)
         self._k_press = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_press",
                                                 stage="lbm.bodies", defines=defines)
+        self._k_press_all = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_press_all",
+                                                    stage="lbm.bodies", defines=defines)
+        self._held_s, self._held_steps = 0.0, 0   # water time since the last coupled update
+        self._rec_key, self._rec = None, None
+        self.per_body = PRESS_WG   # pressure-pass work-items per body (set by _upload)
         self._depth = None
         self._floor = 0.0
         specs, rows = list(specs), list(rows)
@@ -328,11 +345,11 @@ class Boats:
         self._upload()
         self.coupled = bool(coupled)
         if self.coupled:
-            sim.add_step_hook(self.enqueue_step)
+            sim.add_step_hook(self._water_step)
 
     def close(self) -> None:
         """Stop following the water (removes the step hook)."""
-        self.sim.remove_step_hook(self.enqueue_step)
+        self.sim.remove_step_hook(self._water_step)
 
     # -- building -----------------------------------------------------------------------------
     def _water(self) -> dict:
@@ -419,6 +436,8 @@ class Boats:
         rec["foot"] = (hull.x0, hull.z0, hull.dfx, hull.dfz)
         rec["foot_n"] = (hull.footprint.shape[1], hull.footprint.shape[0], 0, int(row))
         rec["flags"] = (1, 0, 0, 0)
+        # the whole grid: the first pressure pass after this restores every cell once
+        rec["box"] = rec["box_old"] = (0, 0, self.sim.nx - 1, self.sim.ny - 1)
         self._host[k] = rec
         self._hulls[k] = hull
         self._slots.append(k)
@@ -448,7 +467,12 @@ class Boats:
                 self._host[k]["torque"][3] = level
         cl.enqueue_copy(self.rt.queue, self._bodies, self._host)
         self._n = (max(self._slots) + 1) if self._slots else 0
-        self.enqueue_press()
+        # the pressure pass: enough work-items per body to cover its box at rest in one sweep
+        dx = self.sim.dx
+        side = max((math.ceil(2 * self._hulls[k].radius / dx) + 4 for k in self._slots),
+                   default=1)
+        self.per_body = min(-(-side * side // PRESS_WG) * PRESS_WG, PRESS_MAX_PER_BODY)
+        self.enqueue_press(full=True)
 
     def add(self, spec: BoatSpec, row: int) -> int:
         """Add a boat writing transform row ``row``; returns its index in :attr:`names`. Reads
@@ -472,34 +496,61 @@ class Boats:
         cl.enqueue_copy(self.rt.queue, self._host, self._bodies).wait()
 
     # -- per frame ------------------------------------------------------------------------------
-    def _step_record(self, dt: float) -> np.void:
-        lx, ly = self.sim.size
-        return record(BODY_STEP_DTYPE, origin=(*self.origin, 0.0), dt=dt,
-                      gravity=self.sim.lattice.gravity, rho=self.rho, n_bodies=self._n,
-                      size_x=lx, size_z=ly, floor=self._floor)
+    def _step_record(self, dt: float, n_sub: int = 1) -> np.void:
+        key = (dt, n_sub, self._n, self._floor)
+        if key != self._rec_key:
+            lx, ly = self.sim.size
+            self._rec = record(BODY_STEP_DTYPE, origin=(*self.origin, 0.0), dt=dt,
+                               gravity=self.sim.lattice.gravity, rho=self.rho,
+                               n_bodies=self._n, size_x=lx, size_z=ly, floor=self._floor,
+                               n_sub=n_sub)
+            self._rec_key = key
+        return self._rec
+
+    @property
+    def every(self) -> int:
+        """Water steps per coupled update: the most whose time fits in ``max_substep``, >= 1."""
+        return max(1, int(self.max_substep / self.sim.dt * (1 + 1e-9)))
+
+    def _water_step(self, dt: float) -> None:
+        """The step hook: the boats are updated once :attr:`every` water steps have passed."""
+        self._held_s += dt
+        self._held_steps += 1
+        if self._held_steps >= self.every:
+            held, self._held_s, self._held_steps = self._held_s, 0.0, 0
+            self.enqueue_step(held)
 
     def enqueue_step(self, dt: float) -> cl.Event | None:
         """Advance the boats by ``dt`` seconds against the water as it is now (substeps of at
-        most ``max_substep``), write their transform rows, then their pressure head for the
-        next water steps. Only enqueues."""
+        most ``max_substep``, all in one launch), write their transform rows, then their
+        pressure head for the next water steps. Only enqueues: two launches for all boats."""
         if not (isinstance(dt, int | float | np.floating) and math.isfinite(dt) and dt >= 0):
             raise ValueError(f"enqueue_step: dt={dt!r} must be a finite number >= 0 (s)")
         if self._n == 0 or dt == 0:
             return None
-        n_sub = max(1, math.ceil(dt / self.max_substep))
-        k = self._k_step.bind(f=self.sim.populations_buffer, zforce=self._zforce,
-                              p=self.sim.params, foot=self._foot, bodies=self._bodies,
-                              transforms=self.transforms, s=self._step_record(dt / n_sub))
-        for _ in range(n_sub):
-            k.launch(self._n * BODY_WG, BODY_WG)
+        n_sub = max(1, math.ceil(dt / self.max_substep * (1 - 1e-9)))
+        self._k_step.bind(f=self.sim.populations_buffer, zforce=self._zforce,
+                          p=self.sim.params, foot=self._foot, bodies=self._bodies,
+                          transforms=self.transforms, s=self._step_record(dt / n_sub, n_sub))
+        self._k_step.launch(self._n * BODY_WG, BODY_WG)
         return self.enqueue_press()
 
-    def enqueue_press(self) -> cl.Event:
-        """Write the hulls' pressure head into the bed the water's force sees."""
+    def enqueue_press(self, full: bool = False) -> cl.Event | None:
+        """Write the hulls' pressure head into the bed the water's force sees: over the cells
+        of the boxes the last bodies step set (the hulls' and the ones they left), or with
+        ``full`` over every cell."""
         sim = self.sim
-        self._k_press.bind(bed=sim.bed_buffer, zforce=self._zforce, p=sim.params,
-                           foot=self._foot, bodies=self._bodies, s=self._step_record(0.0))
-        return self._k_press.launch((sim.nx, sim.ny), (64, 1) if self.rt.is_gpu else None)
+        args = dict(bed=sim.bed_buffer, zforce=self._zforce, p=sim.params, foot=self._foot,
+                    bodies=self._bodies, s=self._step_record(0.0))
+        if full:
+            self._k_press_all.bind(**args)
+            return self._k_press_all.launch((sim.nx, sim.ny),
+                                            (64, 1) if self.rt.is_gpu else None)
+        if self._n == 0:
+            return None
+        self._k_press.bind(per_body=self.per_body, **args)
+        return self._k_press.launch(self._n * self.per_body,
+                                    PRESS_WG if self.rt.is_gpu else None)
 
     # -- host reads (tests, saving) -------------------------------------------------------------
     def state(self) -> np.ndarray:

@@ -38,18 +38,19 @@ SOURCE_DTYPE = np.dtype([
 ])
 
 _F4 = ("<f4", (4,))
-#: LbmBody, 224 bytes (kernels/lbm_bodies.h): one floating rigid body and its hull footprint.
+#: LbmBody, 256 bytes (kernels/lbm_bodies.h): one floating rigid body and its hull footprint.
 BODY_DTYPE = np.dtype([
     ("pos", *_F4), ("quat", *_F4), ("vel", *_F4), ("omega", *_F4), ("inertia", *_F4),
     ("damping", *_F4), ("force", *_F4), ("torque", *_F4),
     ("base_r0", *_F4), ("base_r1", *_F4), ("base_r2", *_F4), ("foot", *_F4),
-    ("foot_n", "<i4", (4,)), ("flags", "<i4", (4,)),
+    ("foot_n", "<i4", (4,)), ("flags", "<i4", (4,)), ("box", "<i4", (4,)),
+    ("box_old", "<i4", (4,)),
 ])
 
 #: LbmBodyStep, 48 bytes: one bodies launch, by value.
 BODY_STEP_DTYPE = np.dtype([
     ("origin", *_F4), ("dt", "<f4"), ("gravity", "<f4"), ("rho", "<f4"), ("n_bodies", "<i4"),
-    ("size_x", "<f4"), ("size_z", "<f4"), ("floor", "<f4"), ("pad0", "<i4"),
+    ("size_x", "<f4"), ("size_z", "<f4"), ("floor", "<f4"), ("n_sub", "<i4"),
 ])
 
 #: (header, struct name, dtype) of every device struct the lbm package declares.

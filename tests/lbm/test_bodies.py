@@ -10,67 +10,9 @@ import pytest
 
 import lbm
 from lbm.bodies import Boats, BoatSpec, HullError, check_closed, matrix_from_quat, solid_properties
+from tests.lbm.bodies_ref import body64, box, forces, icosphere, pool, read_obj, run, water_sampler
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def box(lx, ly, lz):
-    """A closed box [-lx/2, lx/2] x [0, ly] x [-lz/2, lz/2], outward triangles."""
-    V = np.array([[x, y, z] for x in (-lx / 2, lx / 2) for y in (0, ly) for z in (-lz / 2, lz / 2)])
-    F = np.array([(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1), (2, 3, 7),
-                  (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)])
-    return V, F
-
-
-def icosphere(r, levels=2):
-    t = (1 + 5**0.5) / 2
-    V = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t),
-         (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    F = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
-         (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
-         (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-    V = [np.array(v, float) / np.linalg.norm(v) for v in V]
-    for _ in range(levels):
-        mid, F2 = {}, []
-
-        def m(a, b, mid=mid):
-            key = (min(a, b), max(a, b))
-            if key not in mid:
-                v = V[a] + V[b]
-                V.append(v / np.linalg.norm(v))
-                mid[key] = len(V) - 1
-            return mid[key]
-        for a, b, c in F:
-            ab, bc, ca = m(a, b), m(b, c), m(c, a)
-            F2 += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-        F = F2
-    return r * np.array(V), np.array(F)
-
-
-def read_obj(path):
-    V, F = [], []
-    for line in Path(path).read_text().splitlines():
-        if line.startswith("v "):
-            V.append([float(x) for x in line.split()[1:4]])
-        elif line.startswith("f "):
-            F.append([int(x.split("/")[0]) - 1 for x in line.split()[1:4]])
-    return np.array(V), np.array(F)
-
-
-def pool(rt, dx=0.1, size=(3.0, 2.0), depth=0.5, drag=1.0, **kw):
-    nx, ny = round(size[0] / dx), round(size[1] / dx)
-    return lbm.ShallowWater(nx, ny, dx, device=rt, depth=depth, viscosity=1e-3, drag=drag, **kw)
-
-
-def run(sim, boats, seconds, k=4, every=None):
-    """Frames of k water steps (each followed by a bodies step: the coupled boats' hook);
-    yields (time, positions, speeds)."""
-    frames = int(round(seconds / (k * sim.dt)))
-    for i in range(frames):
-        sim.step(k)
-        if every and (i + 1) % every == 0:
-            v, w = boats.velocities()
-            yield sim.time, boats.poses()[0], np.abs(v).max(1)
 
 
 def test_solid_properties_of_a_box_are_analytic():
@@ -247,62 +189,9 @@ def test_many_frames_stay_finite(rt):
     assert 0.0 < p[0, 0] < 2.4 and 0.0 < p[0, 2] < 2.0
 
 
-def _reference_forces(sim, boats, zforce, f_pop, origin):
-    """Force, torque (about the centre of mass) and submerged volume in float64, from the same
-    formulas as lbm_bodies_step (bilinear head and velocity, columns of the footprint)."""
-    from lbm import reference as ref
-
-    st = boats.state()[0].astype(BODY_DTYPE_F64)
-    hull = boats.hull(0)
-    h, u, v = ref.macro(f_pop.astype(np.float64), sim.e)
-    H = zforce.astype(np.float64) + h
-    nx, ny, dx = sim.nx, sim.ny, sim.dx
-
-    def sample(X, Z):
-        gx = np.clip((X - origin[0]) / dx - 0.5, 0, nx - 1)
-        gz = np.clip((Z - origin[2]) / dx - 0.5, 0, ny - 1)
-        i0, j0 = np.minimum(gx.astype(int), nx - 1), np.minimum(gz.astype(int), ny - 1)
-        i1, j1 = np.minimum(i0 + 1, nx - 1), np.minimum(j0 + 1, ny - 1)
-        fx, fz = gx - i0, gz - j0
-        out = []
-        for a in (H, u, v):
-            out.append((1 - fx) * (1 - fz) * a[j0, i0] + fx * (1 - fz) * a[j0, i1]
-                       + (1 - fx) * fz * a[j1, i0] + fx * fz * a[j1, i1])
-        out[0] = out[0] + origin[1]
-        return out
-
-    R = matrix_from_quat(st["quat"])
-    pos, vel, om = st["pos"][:3], st["vel"][:3], st["omega"][:3]
-    damp = st["damping"]
-    fp = hull.footprint.astype(np.float64)
-    nfz, nfx = fp.shape[:2]
-    zz, xx = np.mgrid[0:nfz, 0:nfx]
-    xb, zb = hull.x0 + xx * hull.dfx, hull.z0 + zz * hull.dfz
-    full = fp[..., 1] >= fp[..., 0]
-    pb = np.stack([xb, fp[..., 0], zb], -1)[full] @ R.T + pos
-    pt = np.stack([xb, fp[..., 1], zb], -1)[full] @ R.T + pos
-    Hs, us, vs = sample(pb[:, 0], pb[:, 2])
-    lo, hi = np.minimum(pb[:, 1], pt[:, 1]), np.maximum(pb[:, 1], pt[:, 1])
-    sub = np.clip(Hs - lo, 0, hi - lo)
-    vc = sub * hull.dfx * hull.dfz * abs(R[1, 1])
-    rel = np.stack([pb[:, 0], lo + 0.5 * sub, pb[:, 2]], -1) - pos
-    vp = vel + np.cross(om, rel)
-    mw = 1000.0 * vc
-    Fc = np.stack([mw * damp[1] * (us - vp[:, 0]), mw * (9.81 - damp[0] * vp[:, 1]),
-                   mw * damp[1] * (vs - vp[:, 2])], -1)
-    return Fc.sum(0), np.cross(rel, Fc).sum(0), vc.sum()
-
-
-BODY_DTYPE_F64 = None
-
-
 def test_force_torque_reduction_matches_float64(rt):
     """The device reduction over a tilted, moving hull on uneven, moving water equals the float64
     NumPy sum of the same column forces (N, N m) to float32 accuracy."""
-    global BODY_DTYPE_F64
-    from lbm.structs import BODY_DTYPE
-
-    BODY_DTYPE_F64 = BODY_DTYPE
     n, dx = 16, 0.1
     jj, ii = np.mgrid[0:n, 0:n]
     x, z = (ii + 0.5) * dx, (jj + 0.5) * dx
@@ -319,7 +208,8 @@ def test_force_torque_reduction_matches_float64(rt):
                   coupled=False)
     boats.set_velocity(0, (0.3, -0.2, 0.1))
     zforce = boats.pressure_head() + sim.fields()["bed"]
-    F_ref, T_ref, V_ref = _reference_forces(sim, boats, zforce, sim.populations(), origin)
+    sample = water_sampler(sim, zforce, sim.populations(), origin)
+    F_ref, T_ref, V_ref = forces(body64(boats.state()[0]), boats.hull(0), sample)
     assert V_ref > 0.005 and abs(T_ref).max() > 1.0       # a real, lopsided load
     boats.enqueue_step(1e-6)
     st = boats.state()[0]
