@@ -513,6 +513,18 @@ class Boats:
         return (s["pos"][:, :3].astype(np.float64).copy(),
                 s["quat"].astype(np.float64).copy())
 
+    def mesh_transforms(self) -> np.ndarray:
+        """world_from_mesh (n, 3, 4) of the boats now, float64 from their records (host copy):
+        the rows the bodies kernel writes into the transform buffer."""
+        s = self.state()
+        out = np.empty((len(s), 3, 4))
+        for i, r in enumerate(s):
+            R = matrix_from_quat(r["quat"])
+            base = np.stack([r["base_r0"], r["base_r1"], r["base_r2"]]).astype(np.float64)
+            out[i] = R @ base
+            out[i][:, 3] += r["pos"][:3]
+        return out
+
     def velocities(self) -> tuple[np.ndarray, np.ndarray]:
         """Linear (n, 3) m/s and angular (n, 3) rad/s velocities."""
         s = self.state()
