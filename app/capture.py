@@ -277,8 +277,10 @@ def frame_count(args, timeline) -> int:
 
 
 def _local_frames(world, timeline, n: int, dt: float):
-    """Yield (i, RGBA8, guard dict) for frames 0..n-1 of one World, frame i+1 enqueued before
-    frame i is read (it renders while i is encoded)."""
+    """Yield (i, RGBA8, guard dict) for frames 0..n-1 of one World (the timeline's frames; the
+    World may have run frames before), frame i+1 enqueued before frame i is read (it renders
+    while i is encoded)."""
+    first = world.frames_enqueued
     timeline.apply(world, 0)
     world.enqueue_frame(dt)
     for i in range(n):
@@ -286,10 +288,10 @@ def _local_frames(world, timeline, n: int, dt: float):
             timeline.apply(world, i + 1)
             world.enqueue_frame(dt)
         index, img = world.read_frame()
-        if index != i:
-            raise RuntimeError(f"internal error: frame {index} came back for frame {i}")
+        if index != first + i:
+            raise RuntimeError(f"internal error: frame {index} came back for frame {first + i}")
         st = world.stats
-        guard = st.guard if st is not None and st.frame == i and st.guard else {}
+        guard = st.guard if st is not None and st.frame == index and st.guard else {}
         yield i, np.array(img, copy=True), guard
 
 

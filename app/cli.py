@@ -27,7 +27,7 @@ COMMANDS = [
     ("render", "app.cmd_render", "render a scene file to a PNG (ray traced)"),
     ("simulate", "app.cmd_simulate", "run a scene's water (LBM) without rendering; save .npz"),
     ("window", "app.window", "interactive window: rain, mouse ripples, orbit camera, HUD"),
-    ("bench", "app.bench", "benchmarks: lbm, bvh, render, frame, window"),
+    ("bench", "app.bench", "benchmarks: lbm, bvh, render, frame, window, capture"),
     ("capture", "app.capture", "render a scene and its [[timeline]] to an H.264 video or PNGs"),
     ("sweep", "app.sweep", "sweep grid size, image size, bounces, spp: FPS, stages; CSV + charts"),
     ("study", "app.studies", "speed against accuracy studies: CSV + chart of error vs time"),

@@ -16,6 +16,8 @@ lb bench frame --cells 1024 --size 1920 1080 --frames 40 --caustics off --out "$
 lb bench frame --cells 1024 --size 3840 2160 --frames 20 --out "$out/frame4k" | tail -1
 lb bench frame --cells 1024 --size 1920 1080 --frames 40 --boats 16 --caustics off --out "$out/frame_boats16" | tail -1
 lb bench frame --cells 1024 --size 1920 1080 --frames 40 --boats 0 --caustics off --out "$out/frame_boats0" | tail -1
+# capture's overhead (H.264 encode, read-back copies) over the bare frame loop, 1920x1080
+lb bench capture --cells 1024 --size 1920 1080 --frames 120 --out "$out/capture1080" | tail -1
 # the window's display path in a headless EGL context
 lb bench window --out "$out/window" 2>&1 | tail -3
 # sort digit widths, interleaved
