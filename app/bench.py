@@ -1,6 +1,6 @@
 """Benchmarks: median of repeated runs with OpenCL event times per stage, warm-up excluded,
 written as JSON (and CSV) under ``--out``. Subcommands: ``lbm``, ``bvh``, ``render``, ``frame``,
-``window`` (``lbwater bench NAME --help`` for each)."""
+``window``, ``capture`` (``lbwater bench NAME --help`` for each)."""
 
 from __future__ import annotations
 
@@ -15,6 +15,8 @@ BENCHES = [
     ("render", "app.bench_render", "renderer: the seed's scenes per stage, FPS, error vs spp"),
     ("frame", "app.bench_frame", "the whole frame loop: LBM, surface, BVH, render"),
     ("window", "app.bench_window", "the window's display path (EGL): frame + upload + draw"),
+    ("capture", "app.bench_capture", "capture's overhead (H.264 encode, read-back copies) "
+                                     "over the bare frame loop"),
 ]
 
 

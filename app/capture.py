@@ -8,9 +8,10 @@ device give the same bytes. Frames stream to the encoder (ffmpeg from imageio-ff
 yuv420p, fragmented MP4) while the next frame renders: frame N+1 is enqueued before frame N is
 encoded. The video is written to ``NAME.partial.mp4`` beside the output and renamed at the end;
 Ctrl-C or a crash closes the encoder properly and leaves that partial video playable, and says
-where it is. An existing output is kept unless ``--force``; an unwritable output or a missing
-encoder fails before any simulation, naming the path given. A progress bar with ETA is drawn on
-a terminal only; the last line sums up frames, seconds, mean FPS and guard warnings.
+where it is (stopped before its first frame, it is removed). An existing output is kept unless
+``--force``; an unwritable output or a missing encoder fails before any simulation, naming the
+path given. A progress bar with ETA is drawn on a terminal only; the last line sums up frames,
+seconds, mean FPS and guard warnings.
 """
 
 from __future__ import annotations
@@ -230,6 +231,44 @@ class Progress:
 
 
 # ---- the command -------------------------------------------------------------------------------
+class _Written:
+    """What :func:`_stream` has written so far (kept when it stops early)."""
+
+    def __init__(self):
+        self.done, self.write_s, self.guard_notes = 0, 0.0, []
+
+
+def _stream(frames, n: int, video, frames_dir, st: _Written, progress: bool) -> None:
+    """Write every (i, image, guard) of ``frames`` to the video and/or PNG folder, counting in
+    ``st``; when stopped (Ctrl-C, a crash), close the video (playable up to its last frame)
+    and say in one line what was written and where."""
+    bar = Progress(n, progress)
+    try:
+        for i, img, guard in frames:
+            if guard.get("nan") or guard.get("acted"):
+                st.guard_notes.append(f"frame {i}: {guard.get('report', 'guard acted')}")
+            tw = time.perf_counter()
+            if video is not None:
+                video.write(img)
+            if frames_dir is not None:
+                _write_png(frames_dir, i, img)
+            st.write_s += time.perf_counter() - tw
+            st.done += 1
+            bar.update(st.done, f"{len(st.guard_notes)} guard warnings" if st.guard_notes
+                       else "")
+    except BaseException:
+        bar.finish()
+        where = ""
+        if video is not None:
+            with contextlib.suppress(Exception):
+                video.close()
+            if st.done:   # without a frame the caller removes the file
+                where = f"; partial video ({st.done} frames): {video.path}"
+        if frames_dir is not None:
+            where += f"; {st.done} PNG frames in {frames_dir}"
+        print(f"lbwater capture: stopped after {st.done} of {n} frames{where}", file=sys.stderr)
+        raise
+    bar.finish()
 def frame_count(args, timeline) -> int:
     if args.frames is not None:
         return int(args.frames)
@@ -238,8 +277,10 @@ def frame_count(args, timeline) -> int:
 
 
 def _local_frames(world, timeline, n: int, dt: float):
-    """Yield (i, RGBA8, guard dict) for frames 0..n-1 of one World, frame i+1 enqueued before
-    frame i is read (it renders while i is encoded)."""
+    """Yield (i, RGBA8, guard dict) for frames 0..n-1 of one World (the timeline's frames; the
+    World may have run frames before), frame i+1 enqueued before frame i is read (it renders
+    while i is encoded)."""
+    first = world.frames_enqueued
     timeline.apply(world, 0)
     world.enqueue_frame(dt)
     for i in range(n):
@@ -247,10 +288,10 @@ def _local_frames(world, timeline, n: int, dt: float):
             timeline.apply(world, i + 1)
             world.enqueue_frame(dt)
         index, img = world.read_frame()
-        if index != i:
-            raise RuntimeError(f"internal error: frame {index} came back for frame {i}")
+        if index != first + i:
+            raise RuntimeError(f"internal error: frame {index} came back for frame {first + i}")
         st = world.stats
-        guard = st.guard if st is not None and st.frame == i and st.guard else {}
+        guard = st.guard if st is not None and st.frame == index and st.guard else {}
         yield i, np.array(img, copy=True), guard
 
 
@@ -275,10 +316,17 @@ def _cluster_frames(args, scene, timeline, n: int, dt: float, kw: dict, stack):
     kept = {0: first}
 
     def frames():
-        for i, img, snap in cluster.render_frames(
-                pool, n, lambda i: kept.pop(i) if i in kept else snapshot_of(i)):
-            yield i, img, snapshot.peek(snap)["guard"]
-    return size, frames()
+        inner = cluster.render_frames(
+            pool, n, lambda i: kept.pop(i) if i in kept else snapshot_of(i))
+        try:
+            for i, img, snap in inner:
+                yield i, img, snapshot.peek(snap)["guard"]
+        finally:
+            inner.close()   # cancels the frames in flight while Ray is still up
+
+    gen = frames()
+    stack.callback(gen.close)   # before pool.close (the stack unwinds last in, first out)
+    return size, gen
 
 
 def run(args) -> int:
@@ -318,48 +366,30 @@ def run(args) -> int:
           "seed": args.seed, "caustics": args.caustics}
     dt = 1.0 / args.fps
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
-    guard_notes: list[str] = []
-    done, write_s = 0, 0.0
-    with contextlib.ExitStack() as stack:
-        if workers is not None:
-            size_got, frames = _cluster_frames(args, scene, timeline, n, dt, kw, stack)
-        else:
-            world = open_world(scene, args.device, **kw)
-            stack.callback(world.close)
-            size_got, frames = world.size, _local_frames(world, timeline, n, dt)
-        if tuple(size_got) != size:
-            raise RuntimeError(f"internal error: asked {size}, the World renders {size_got}")
-        if args.output is not None:
-            video = VideoWriter(partial_path(out), size, args.fps, args.quality)
-        bar = Progress(n, not args.quiet)
-        t0 = time.perf_counter()
-        try:
-            for i, img, guard in frames:
-                if guard.get("nan") or guard.get("acted"):
-                    guard_notes.append(f"frame {i}: {guard.get('report', 'guard acted')}")
-                tw = time.perf_counter()
-                if video is not None:
-                    video.write(img)
-                if frames_dir is not None:
-                    _write_png(frames_dir, i, img)
-                write_s += time.perf_counter() - tw
-                done += 1
-                bar.update(done, f"{len(guard_notes)} guard warnings" if guard_notes else "")
-        except BaseException:
-            bar.finish()
-            where = ""
-            if video is not None:
-                with contextlib.suppress(Exception):
-                    video.close()
-                where = f"; partial video ({done} frames): {video.path}"
-            if frames_dir is not None:
-                where += f"; {done} PNG frames in {frames_dir}"
-            print(f"lbwater capture: stopped after {done} of {n} frames{where}", file=sys.stderr)
-            raise
-        bar.finish()
+    st = _Written()
+    try:
+        with contextlib.ExitStack() as stack:
+            if workers is not None:
+                size_got, frames = _cluster_frames(args, scene, timeline, n, dt, kw, stack)
+            else:
+                world = open_world(scene, args.device, **kw)
+                stack.callback(world.close)
+                size_got, frames = world.size, _local_frames(world, timeline, n, dt)
+            if tuple(size_got) != size:
+                raise RuntimeError(f"internal error: asked {size}, the World renders {size_got}")
+            if args.output is not None:
+                video = VideoWriter(partial_path(out), size, args.fps, args.quality)
+            t0 = time.perf_counter()
+            _stream(frames, n, video, frames_dir, st, not args.quiet)
+    except BaseException:
+        if args.output is not None and st.done == 0:   # no frame: no empty partial file left
+            with contextlib.suppress(OSError):
+                partial_path(out).unlink()
+        raise
     if video is not None:
         video.close()
         os.replace(video.path, out)
+    guard_notes, write_s = st.guard_notes, st.write_s
     wall = time.perf_counter() - t0
     target = ", ".join(str(p) for p in (args.output, args.frames_dir) if p)
     guard = (f"{len(guard_notes)} guard warnings (first: {guard_notes[0]})" if guard_notes

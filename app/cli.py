@@ -5,14 +5,20 @@ this file only registers them and turns user-facing errors into one line and exi
 
 Only the module of the command being run is imported (``lbwater --help`` imports none of them, and
 no command module imports pyopencl at import time), so the parser is built in milliseconds and a
-Ctrl-C at any moment prints one line, ``lbwater: interrupted``, and exits with status 130.
+Ctrl-C at any moment prints one line, ``lbwater: interrupted``, and exits with status 130. The
+console script enters through :mod:`app.entry`, whose first statements make that so before any
+import; ``python -m app.cli`` installs the same handler before this module imports anything but
+``sys`` (argparse and importlib are imported inside the functions).
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import sys
+
+if __name__ == "__main__":   # python -m app.cli: Ctrl-C is one line from here on
+    from app.entry import install
+
+    install()
 
 #: (name, module, one-line help). A module is imported only when its command is run or its
 #: own ``--help`` is asked for.
@@ -21,7 +27,7 @@ COMMANDS = [
     ("render", "app.cmd_render", "render a scene file to a PNG (ray traced)"),
     ("simulate", "app.cmd_simulate", "run a scene's water (LBM) without rendering; save .npz"),
     ("window", "app.window", "interactive window: rain, mouse ripples, orbit camera, HUD"),
-    ("bench", "app.bench", "benchmarks: lbm, bvh, render, frame, window"),
+    ("bench", "app.bench", "benchmarks: lbm, bvh, render, frame, window, capture"),
     ("capture", "app.capture", "render a scene and its [[timeline]] to an H.264 video or PNGs"),
     ("sweep", "app.sweep", "sweep grid size, image size, bounces, spp: FPS, stages; CSV + charts"),
     ("study", "app.studies", "speed against accuracy studies: CSV + chart of error vs time"),
@@ -39,9 +45,12 @@ def _command_of(argv: list[str]) -> str | None:
     return None
 
 
-def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
-    """The parser; only the command named in ``argv`` gets its module's arguments (all of them
-    when ``argv`` is None, e.g. for documentation tools)."""
+def build_parser(argv: list[str] | None = None):
+    """The argparse parser; only the command named in ``argv`` gets its module's arguments (all
+    of them when ``argv`` is None, e.g. for documentation tools)."""
+    import argparse
+    import importlib
+
     parser = argparse.ArgumentParser(
         prog="lbwater",
         description="GPU shallow-water simulation and ray-traced water rendering (OpenCL).")
@@ -73,13 +82,48 @@ def _one_line(exc: BaseException) -> tuple[str, list[str]]:
     return (lines[0] if lines else type(exc).__name__), lines[1:]
 
 
+def _take_over_ctrl_c() -> None:
+    """Ctrl-C raises KeyboardInterrupt from here on (handled in :func:`main`, after cleanups)
+    where app.entry's handler (one line, exit now) guarded the imports."""
+    import signal
+
+    from app import entry
+
+    if entry.installed():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def _redeliver_swallowed(previous):
+    """An unraisable-exception hook: a KeyboardInterrupt raised inside a callback whose errors
+    Python only reports (importlib's module-lock weakref callback during an import, a
+    ``__del__``) would print a traceback and be lost; it is delivered again instead, 10 ms
+    later from a timer thread (delivered from here it would land in this hook, whose errors are
+    only reported too), where :func:`main` catches it."""
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            import _thread
+            import threading
+
+            t = threading.Timer(0.01, _thread.interrupt_main)
+            t.daemon = True
+            t.start()
+            return
+        previous(unraisable)
+    return hook
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    previous = sys.unraisablehook
+    sys.unraisablehook = _redeliver_swallowed(previous)
     try:
+        _take_over_ctrl_c()
         return _main(argv)
     except KeyboardInterrupt:
         print("lbwater: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    finally:
+        sys.unraisablehook = previous
 
 
 def _main(argv: list[str]) -> int:
@@ -112,4 +156,6 @@ def _main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from app.entry import finish
+
+    sys.exit(finish(main()))

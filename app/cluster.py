@@ -61,6 +61,24 @@ def _wants_cpu(device: str | None) -> bool:
 
 
 # ---- the actor ----------------------------------------------------------------------------
+#: test hook: a folder; the first actor asked for its second frame while FOLDER/arm exists takes
+#: it (an atomic rename to FOLDER/died_PID_FRAME) and its process exits at once, so that frame
+#: is in flight on a dead worker (tests/app/test_cluster.py)
+FAULT_ENV = "LBWATER_TEST_WORKER_EXIT"
+
+
+def _fault_hook(rendered: int, index: int) -> None:
+    folder = os.environ.get(FAULT_ENV)
+    if not folder or rendered < 2:
+        return
+    try:
+        os.rename(os.path.join(folder, "arm"),
+                  os.path.join(folder, f"died_{os.getpid()}_{index}"))
+    except OSError:   # not armed, or another actor took it
+        return
+    os._exit(1)
+
+
 class Worker:
     """One Ray actor: one OpenCL device and, for a capture, a World that renders snapshots.
 
@@ -109,6 +127,8 @@ class Worker:
 
     def render(self, index: int, snap: bytes):
         """Frame ``index`` from its snapshot: (index, RGBA8 image)."""
+        self.rendered = getattr(self, "rendered", 0) + 1
+        _fault_hook(self.rendered, index)
         return index, self.world.render_snapshot(snap)
 
     def measure(self, scene_path: str, point: dict) -> dict:
@@ -134,6 +154,9 @@ class Pool:
         self.workers, self.device = check_workers(workers), device
         self.start_timeout = start_timeout
         self._started_ray = False
+        self.live: list = []         # actors that answered info()
+        self.starting: dict = {}     # info ref -> actor
+        self.info: dict = {}         # actor -> info dict
         if not ray.is_initialized():
             kw = {"include_dashboard": False, "logging_level": "ERROR",
                   "log_to_driver": False}
@@ -158,9 +181,6 @@ class Pool:
         if capture is not None:   # one copy of frame 0's snapshot in the object store
             self._args = (capture[0], capture[1], ray.put(capture[2]))
         self.replacements = self.workers
-        self.live: list = []         # actors that answered info()
-        self.starting: dict = {}     # info ref -> actor
-        self.info: dict = {}         # actor -> info dict
         try:
             for _ in range(self.workers):
                 self._start()

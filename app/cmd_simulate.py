@@ -9,7 +9,9 @@ boat_rotation (boats x 4, quaternion w, x, y, z) and boat_names (the boats float
 coupled both ways, lbm.bodies). Written atomically: on any error no file is left behind.
 
 ``--vtk DIR --every K`` also writes the surface every K steps (and at the start and the end) as a
-ParaView time series ``DIR/water.pvd`` of structured grids with h, u, v, bed (app.vtk_output).
+ParaView time series ``DIR/water.pvd`` of structured grids with h, u, v, bed, and with
+``[[boats]]`` the boats' meshes placed by their poses at the same steps as ``DIR/boats.pvd``
+(app.vtk_output).
 """
 
 from __future__ import annotations
@@ -87,8 +89,18 @@ def run(args) -> int:
     t0, done, stages, reports = time.perf_counter(), 0, {}, []
     acted = {"cells": 0, "restored": 0, "froude": 0.0}
 
+    vtk_boats = None
+    if vtk is not None and boats is not None:
+        from app.vtk_output import PvdWriter, boats_polydata
+
+        vtk_boats = PvdWriter(args.vtk, "boats")
+        boat_meshes = [(b.vertices, b.faces) for b in bodies]
+
     def write_vtk():
         vtk.write(done, sim.time, sim.fields(), sim.dx, scene.water.origin)
+        if vtk_boats is not None:
+            vtk_boats.write_dataset(done, sim.time, boats_polydata(
+                boat_meshes, boats.mesh_transforms()), "vtp")
 
     if vtk is not None:
         write_vtk()
@@ -125,7 +137,8 @@ def run(args) -> int:
     x = (np.arange(sim.nx) + 0.5) * sim.dx
     y = (np.arange(sim.ny) + 0.5) * sim.dx
     if vtk is not None:
-        log(f"wrote {vtk.pvd_path} ({len(vtk.entries)} surfaces)")
+        also = f" and {vtk_boats.pvd_path}" if vtk_boats is not None else ""
+        log(f"wrote {vtk.pvd_path}{also} ({len(vtk.entries)} steps)")
     if args.save is None:
         return 0
     extra = {}

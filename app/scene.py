@@ -269,6 +269,8 @@ MESH_SCHEMA = {
 }
 
 BOAT_SCHEMA = {
+    "name": Field("str", "", doc="what [[timeline]] boat entries call it ('' : the file's stem, "
+                                 "numbered where several boats share a file)"),
     "file": Field("str", doc="OBJ/PLY/STL file rendered (relative to the scene, or scenes/models)"),
     "hull": Field("str", "", doc="closed mesh for buoyancy, in the file's frame ('' : file, "
                                  "which must then be closed)"),
@@ -375,6 +377,7 @@ class MeshSpec:
 class BoatSpec:
     """A ``[[boats]]`` table: a floating rigid body (lbm.bodies) rendered as a mesh."""
 
+    name: str
     file: Path
     hull: Path | None
     mass: float | None
@@ -521,8 +524,17 @@ def _boats(value, src: SourceText, base: Path) -> tuple:
         if not all(isinstance(x, str) for x in mats.values()):
             raise InputError(f"{src.where('boats', 'materials')}: values must be material names")
         v["materials"] = dict(mats)
-        out.append(BoatSpec(**v))
-    return tuple(out)
+        out.append(v)
+    stems = [v["file"].stem for v in out]
+    names = []
+    for k, v in enumerate(out):
+        name = v["name"] or (stems[k] if stems.count(stems[k]) == 1 else f"{stems[k]}_{k + 1}")
+        if name in names:
+            raise InputError(f"{src.where('boats', 'name')}: two boats are named {name!r}; "
+                             "give each a different name")
+        names.append(name)
+        v["name"] = name
+    return tuple(BoatSpec(**v) for v in out)
 
 
 def _pool(value, src: SourceText, base: Path) -> PoolSpec:

@@ -25,8 +25,21 @@ first holds, after the last the last. Without camera keys the scene's ``[camera]
 Frame i of a capture at ``fps`` advances the water from ``t0 = i / fps`` to ``t1 = (i + 1) /
 fps``: the drops, rain changes and the share of pushes due in ``[t0, t1)`` are applied at the
 start of frame i (so a drop at time T is first seen in frame ``ceil(T * fps)``), and the camera
-is the one at ``t1``, the moment the image shows. ``boat`` entries are validated only where the
-scene has boats (not in this build: a boat entry is an error naming the line).
+is the one at ``t1``, the moment the image shows.
+
+    [[timeline]]
+    time = 1.0                   # a boat (a [[boats]] name) lifted 0.4 m above the water, held
+    boat = { name = "sailboat", position = [1.0, 1.5], height = 0.4, hold = true }
+
+    [[timeline]]
+    time = 2.0                   # ... and let go: it falls, splashes and floats
+    boat = { name = "sailboat", action = "release" }
+
+A ``place`` puts the boat's centre of mass over pool point ``position`` (m), upright, its keel
+``height`` m above the still water (default: afloat at its rest draft), turned ``heading`` deg
+(as ``[[boats]] rotation``'s y; default: the heading it has), at rest or moving at ``velocity``
+(pool x, y in m/s); ``hold = true`` keeps it there, at rest, until a ``release`` (which may give
+it a ``velocity``). Like a drop, a boat entry lands at the start of its frame.
 """
 
 from __future__ import annotations
@@ -72,10 +85,21 @@ CAMERA_SCHEMA = {
     "fov": Field("float", None, lo=1.0, hi=179.0, unit="deg", doc="vertical field of view"),
 }
 BOAT_SCHEMA = {
-    "name": Field("str", doc="the boat, as named in the scene"),
-    "action": Field("str", "place", choices=("place", "release"), doc="place or release"),
-    "position": Field("vec3", None, lo=-1e6, hi=1e6, unit="m", doc="where (place)"),
+    "name": Field("str", doc="the boat, as [[boats]] name (default: its file's stem) calls it"),
+    "action": Field("str", "place", choices=("place", "release"),
+                    doc="place it (position needed), or release a held one"),
+    "position": Field("vec2", None, lo=-1e6, hi=1e6, unit="m",
+                      doc="pool point (x, y) under its centre of mass (place)"),
+    "height": Field("float", None, lo=-100.0, hi=1e4, unit="m",
+                    doc="its keel above the still water (place; default: afloat at rest)"),
+    "heading": Field("float", None, lo=-360.0, hi=360.0, unit="deg",
+                     doc="turn about the vertical, as [[boats]] rotation's y (place; default: "
+                         "the heading it has)"),
+    "velocity": Field("vec2", None, lo=-100.0, hi=100.0, unit="m/s",
+                      doc="its speed along the pool's x, y from then on (default at rest)"),
+    "hold": Field("bool", False, doc="place: hold it there (at rest) until a release entry"),
 }
+_PLACE_ONLY = ("position", "height", "heading", "hold")
 
 
 @dataclass(frozen=True)
@@ -117,8 +141,12 @@ class CameraKey:
 class BoatEvent:
     time: float
     name: str
-    action: str
-    position: tuple | None
+    action: str                  #: place | release
+    position: tuple | None       #: pool (x, y) m
+    height: float | None = None  #: keel above the still water (m); None: afloat at rest
+    heading: float | None = None  #: degrees about the vertical; None: kept
+    velocity: tuple | None = None  #: (vx, vy) m/s along the pool's x, y
+    hold: bool = False
 
 
 def parse_timeline(value, src: SourceText, base: Path) -> tuple:
@@ -150,7 +178,15 @@ def parse_timeline(value, src: SourceText, base: Path) -> tuple:
             out.append(CameraKey(time_s, c["eye"], c["target"], c["up"], c["fov"]))
         else:
             b = validate_table(v["boat"], BOAT_SCHEMA, sec, src)
-            out.append(BoatEvent(time_s, b["name"], b["action"], b["position"]))
+            if b["action"] == "place" and b["position"] is None:
+                raise InputError(f"{src.where('timeline')}: {where} (time = {time_s:g}): boat "
+                                 f"{b['name']!r}: place needs a position = [x, y] (pool m)")
+            extra = [k for k in _PLACE_ONLY if b["action"] == "release"
+                     and b[k] not in (None, False)]
+            if extra:
+                raise InputError(f"{src.where('timeline')}: {where} (time = {time_s:g}): boat "
+                                 f"{b['name']!r}: release takes no {extra[0]} (only velocity)")
+            out.append(BoatEvent(time_s, **b))
     return tuple(sorted(out, key=lambda e: e.time))
 
 
@@ -159,6 +195,7 @@ def check_timeline(scene) -> None:
     actions, boats that exist. One-line InputError naming the file and the entry."""
     events = getattr(scene, "timeline", ()) or ()
     w = scene.water
+    held: dict[str, bool] = {}   # boat name -> held now (events are sorted by time)
     for e in events:
         where = f"{scene.path}: [[timeline]] time = {e.time:g}"
         if isinstance(e, Drop | Rain | Push) and w is None:
@@ -176,6 +213,16 @@ def check_timeline(scene) -> None:
             if e.name not in names:
                 raise InputError(f"{where}: boat {e.name!r} is not in the scene (boats: "
                                  f"{', '.join(names) or 'none'})")
+            if e.position is not None:
+                x, y = e.position
+                sx, sy = w.size
+                if not (0 <= x <= sx and 0 <= y <= sy):
+                    raise InputError(f"{where}: boat {e.name!r} position ({x:g}, {y:g}) m is "
+                                     f"outside the pool [0, {sx:g}] x [0, {sy:g}] m")
+            if e.action == "release" and not held.get(e.name, False):
+                raise InputError(f"{where}: boat {e.name!r} is released but not held (place it "
+                                 "with hold = true first)")
+            held[e.name] = e.action == "place" and e.hold
 
 
 @dataclass
@@ -289,6 +336,13 @@ class Timeline:
             world.push(*p)
         if fi.rain is not None:
             world.set_rain(fi.rain)
+        for b in fi.boats:
+            v = b.velocity
+            if b.action == "place":
+                world.place_boat(b.name, *b.position, height=b.height, heading=b.heading,
+                                 velocity=v or (0.0, 0.0), hold=b.hold)
+            else:
+                world.release_boat(b.name, velocity=v)
         if self._keys:
             world.set_camera(*fi.camera)
         return fi

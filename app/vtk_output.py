@@ -1,11 +1,15 @@
-"""ParaView output: the water surface as a ``.pvd`` time series of structured grids (``.vts``).
+"""ParaView output: the water surface as a ``.pvd`` time series of structured grids (``.vts``),
+and the boats as a second series of triangle meshes (``.vtp``) at the same times.
 
 Each step written is one ``water_NNNNNN.vts``: a structured grid of the cell centres at the
 surface height (x, bed + h, z in metres, Y up, the scene's origin added) with point data ``h``
 (depth, m), ``u``, ``v`` (velocity along x and z, m/s), ``bed`` (m) and ``eta`` (bed + h, m);
-``water.pvd`` lists them with their simulated times. pyvista is imported when the first file is
-written (machines without VTK still run everything else), and VTK's own log and warning lines
-never reach the terminal: a failure is one :class:`~app.errors.InputError` line.
+``water.pvd`` lists them with their simulated times. With ``[[boats]]``, ``boats_NNNNNN.vtp``
+holds every boat's rendered mesh placed by its pose at that step (world metres, one PolyData,
+cell and point data ``boat``: the boat's index in ``[[boats]]``), listed by ``boats.pvd``.
+pyvista is imported when the first file is written (machines without VTK still run everything
+else), and VTK's own log and warning lines never reach the terminal: a failure is one
+:class:`~app.errors.InputError` line.
 """
 
 from __future__ import annotations
@@ -63,9 +67,30 @@ def surface_grid(fields: dict, dx: float, origin=(0.0, 0.0, 0.0)):
     return grid
 
 
+def boats_polydata(meshes, transforms):
+    """One pyvista PolyData of the boats: ``meshes`` [(V (n, 3), F (m, 3))] in their files'
+    frames, each placed by ``transforms[k]`` (3, 4) world_from_mesh; cell and point data
+    ``boat`` = k."""
+    pv = _quiet_pyvista()
+    pts, faces, pid, cid, off = [], [], [], [], 0
+    for k, ((V, F), M) in enumerate(zip(meshes, transforms, strict=True)):
+        V = np.asarray(V, np.float64)
+        M = np.asarray(M, np.float64)
+        pts.append(V @ M[:, :3].T + M[:, 3])
+        F = np.asarray(F, np.int64)
+        faces.append(np.hstack([np.full((len(F), 1), 3), F + off]))
+        pid.append(np.full(len(V), k, np.int32))
+        cid.append(np.full(len(F), k, np.int32))
+        off += len(V)
+    mesh = pv.PolyData(np.concatenate(pts), np.concatenate(faces).ravel())
+    mesh.point_data["boat"] = np.concatenate(pid)
+    mesh.cell_data["boat"] = np.concatenate(cid)
+    return mesh
+
+
 class PvdWriter:
-    """Writes ``water_NNNNNN.vts`` files and keeps ``water.pvd`` listing them (rewritten
-    atomically after each, so an interrupted run leaves a valid series)."""
+    """Writes ``NAME_NNNNNN.vts`` (or ``.vtp``) files and keeps ``NAME.pvd`` listing them
+    (rewritten atomically after each, so an interrupted run leaves a valid series)."""
 
     def __init__(self, folder: str | os.PathLike, name: str = "water"):
         self.folder = check_folder(folder)
@@ -77,12 +102,16 @@ class PvdWriter:
         return self.folder / f"{self.name}.pvd"
 
     def write(self, step: int, time_s: float, fields: dict, dx: float, origin=(0, 0, 0)) -> Path:
-        grid = surface_grid(fields, dx, origin)
-        fname = f"{self.name}_{step:06d}.vts"
+        """The water surface of ``fields`` at ``step`` (see :func:`surface_grid`)."""
+        return self.write_dataset(step, time_s, surface_grid(fields, dx, origin), "vts")
+
+    def write_dataset(self, step: int, time_s: float, data, ext: str) -> Path:
+        """Any pyvista dataset as ``NAME_{step}.{ext}`` (vts: structured grid, vtp: polydata)."""
+        fname = f"{self.name}_{step:06d}.{ext}"
         path = self.folder / fname
         try:
-            with atomic_path(path, suffix=".partial.vts") as tmp:
-                grid.save(str(tmp), binary=True)
+            with atomic_path(path, suffix=f".partial.{ext}") as tmp:
+                data.save(str(tmp), binary=True)
         except (OSError, ValueError, RuntimeError) as exc:
             raise InputError(f"--vtk: cannot write {path}: {exc}") from None
         self.entries = [e for e in self.entries if e[1] != fname] + [(float(time_s), fname)]

@@ -74,6 +74,7 @@ class Frame:
     sim_time_end: float = 0.0
     drops: list = dataclasses.field(default_factory=list)
     pushes: list = dataclasses.field(default_factory=list)
+    boats: list = dataclasses.field(default_factory=list)   # (method name, args, kwargs)
 
 
 class _Slot:
@@ -159,6 +160,7 @@ class World:
         self._next = 0                  # index of the next frame
         self._drops: list = []
         self._pushes: list = []
+        self._boat_moves: list = []
         self._stage_ms: dict = {}       # frame index -> stage times, until its stats are made
         self._stats: FrameStats | None = None
         self._picker = None
@@ -281,6 +283,59 @@ class World:
         self.drain()
         self.boats.place(index, (ox + x, oy + w.depth + float(height), oz + y))
 
+    def boat_index(self, boat: int | str) -> int:
+        """Index of a boat given by index or by its ``[[boats]]`` name; one InputError if none."""
+        names = [b.name for b in self.scene.boats] if self.boats is not None else []
+        if isinstance(boat, str):
+            if boat not in names:
+                raise InputError(f"boat {boat!r} is not in the scene (boats: "
+                                 f"{', '.join(names) or 'none'})")
+            return names.index(boat)
+        if isinstance(boat, bool) or not isinstance(boat, int) or not 0 <= boat < len(names):
+            raise InputError(f"boat {boat!r} out of range [0, {len(names)})")
+        return boat
+
+    def place_boat(self, boat: int | str, x: float, y: float, *, height: float | None = None,
+                   heading: float | None = None, velocity=(0.0, 0.0), hold: bool = False) -> None:
+        """Put a boat (index or ``[[boats]]`` name) upright over pool point (x, y) m, its keel
+        ``height`` m above the still water (None: afloat at its rest draft), turned ``heading``
+        deg about the vertical as ``[[boats]] rotation``'s y (None: the heading it has), moving
+        at ``velocity`` (pool x, y m/s); ``hold``: kept there at rest until
+        :meth:`release_boat`. Applied at the start of the next frame (a timeline ``boat``)."""
+        i = self.boat_index(boat)
+        sx, sy = self.sim.size
+        if not (0 <= x <= sx and 0 <= y <= sy):
+            raise InputError(f"place_boat: ({x:g}, {y:g}) m is outside the pool [0, {sx:g}] x "
+                             f"[0, {sy:g}] m")
+        vals = [x, y, *velocity] + [v for v in (height, heading) if v is not None]
+        if not all(math.isfinite(float(v)) for v in vals):
+            raise InputError(f"place_boat: values must be finite, got {vals}")
+        self._boat_moves.append(("place", i, (float(x), float(y)), dict(
+            height=height, heading=heading, velocity=tuple(map(float, velocity)),
+            hold=bool(hold))))
+
+    def release_boat(self, boat: int | str, velocity=None) -> None:
+        """Let a held boat go, at rest or moving at ``velocity`` (pool x, y m/s), at the start
+        of the next frame."""
+        i = self.boat_index(boat)
+        v = None if velocity is None else tuple(map(float, velocity))
+        if v is not None and not all(map(math.isfinite, v)):
+            raise InputError(f"release_boat: velocity {v} must be finite")
+        self._boat_moves.append(("release", i, (), {"velocity": v}))
+
+    def _move_boat(self, action: str, i: int, args: tuple, kw: dict) -> None:
+        """Apply one queued boat move (the inputs stage: a host round trip in queue order)."""
+        v = kw.get("velocity")
+        vel = None if v is None else (v[0], 0.0, v[1])   # pool (x, y) -> world (x, z)
+        if action == "release":
+            self.boats.release(i, vel)
+            return
+        ox, _, oz = self.scene.water.origin
+        pos = self.boats.rest_position(i, ox + args[0], oz + args[1], kw["height"])
+        h = kw["heading"]
+        self.boats.place(i, pos, heading=None if h is None else -math.radians(h), velocity=vel,
+                         hold=kw["hold"])
+
     def boat_poses(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(positions (boats, 3) m, quaternions (boats, 4) w, x, y, z) now; a host read."""
         if self.boats is None:
@@ -333,8 +388,9 @@ class World:
         seconds = float(seconds)
         if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
             raise InputError(f"frame seconds {seconds:g} is out of range; allowed [0, 3600]")
-        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes)
-        self._drops, self._pushes = [], []
+        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes,
+                      boats=self._boat_moves)
+        self._drops, self._pushes, self._boat_moves = [], [], []
         return self._enqueue(frame, self.stages)
 
     def _enqueue(self, frame: Frame, stages) -> int:
@@ -356,8 +412,9 @@ class World:
         seconds = float(seconds)
         if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
             raise InputError(f"advance seconds {seconds:g} is out of range; allowed [0, 3600]")
-        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes)
-        self._drops, self._pushes = [], []
+        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes,
+                      boats=self._boat_moves)
+        self._drops, self._pushes, self._boat_moves = [], [], []
         for stage in self.stages:
             if stage.name in ("inputs", "water"):
                 stage.enqueue(frame, None)
@@ -395,8 +452,9 @@ class World:
         seconds = float(seconds)
         if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
             raise InputError(f"frame seconds {seconds:g} is out of range; allowed [0, 3600]")
-        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes)
-        self._drops, self._pushes = [], []
+        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes,
+                      boats=self._boat_moves)
+        self._drops, self._pushes, self._boat_moves = [], [], []
         traced = self._caustics is not None and self._caustics.enabled
         for stage in self.stages:   # the stages that change state; the picture's are skipped
             if stage.name in ("render", "readback") or (
@@ -610,7 +668,8 @@ class World:
 
 # ---- the stages ---------------------------------------------------------------------------
 class _Inputs:
-    """Drops and pushes queued since the last frame, applied first (by-value arguments)."""
+    """Drops and pushes queued since the last frame, applied first (by-value arguments), and
+    boat moves (a host round trip each, in queue order: only on frames that have one)."""
 
     name = "inputs"
 
@@ -626,6 +685,8 @@ class _Inputs:
                 sim.add_drop(*d)
             for p in frame.pushes:
                 sim.push(*p)
+            for move in frame.boats:
+                self.world._move_boat(*move)
         except ValueError as exc:
             raise InputError(str(exc)) from None
 

@@ -181,7 +181,10 @@ void lbm_body_integrate(LbmBody* body, const float3 Fh, const float3 Th, const f
     if (lo_z > hi_z) p2.z = s.origin.z + 0.5f * s.size_z;
     const int finite = all(isfinite(p2)) && all(isfinite(v2)) && all(isfinite(w2))
                        && all(isfinite(q2));
-    if (finite) {
+    if (body->flags.y != 0) {   /* held: the pose stays, at rest */
+        body->vel.xyz = (float3)(0.0f);
+        body->omega.xyz = (float3)(0.0f);
+    } else if (finite) {
         body->pos.xyz = p2;
         body->vel.xyz = v2;   /* vel.w: the keel depth, kept */
         body->omega.xyz = w2;

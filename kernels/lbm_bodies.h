@@ -36,7 +36,8 @@ typedef struct {
     float4 foot;     /* footprint: x0, z0 (first sample centre, body m), dfx, dfz (m) */
     int4 foot_n;     /* nfx, nfz, offset of the first column in the footprint array, row of
                         the transform buffer this body writes */
-    int4 flags;      /* x: 1 active; y, z, w: unused */
+    int4 flags;      /* x: 1 active; y: 1 held (the pose stays, at rest; the hull still
+                        presses on the water); z, w: unused */
     int4 box;        /* cells (i0, j0, i1, j1), inclusive, holding the bounding circle of the
                         pose the next pressure pass presses, one cell of margin (set by the
                         bodies step) */

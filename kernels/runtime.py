@@ -65,8 +65,11 @@ def driver_cache_dir(device: cl.Device) -> str:
 @contextlib.contextmanager
 def _build_guard(device: cl.Device):
     """Around a program build: print a one-line note when it is slow (not cached), and hold a
-    Ctrl-C until the compiler returns (an interrupted compiler prints stray error lines); the
-    interrupt is raised right after."""
+    Ctrl-C until the compiler returns; the interrupt is raised right after. Holding it takes two
+    things: this thread blocks SIGINT, and the process-wide disposition is ours for the build
+    (LLVM, loaded with the OpenCL compiler, installs a SIGINT handler that deletes the
+    compilation's temporary files, so a Ctrl-C taken by any other thread failed the build with
+    a stray '1 error generated.' line)."""
     global _build_note_shown
 
     def note():
@@ -82,6 +85,9 @@ def _build_guard(device: cl.Device):
         timer.start()
     main = threading.current_thread() is threading.main_thread()
     blocked = main and hasattr(signal, "pthread_sigmask")
+    got, previous = [], None
+    if main:
+        previous = signal.signal(signal.SIGINT, lambda *a: got.append(True))
     if blocked:
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
@@ -89,8 +95,13 @@ def _build_guard(device: cl.Device):
     finally:
         if timer is not None:
             timer.cancel()
-        if blocked:
+        if main:
+            signal.signal(signal.SIGINT, previous if previous is not None
+                          else signal.default_int_handler)
+        if blocked:   # one held for this thread is delivered now, to the handler put back
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        if got:       # one another thread took during the build
+            signal.raise_signal(signal.SIGINT)
 
 
 def _write_build_log(source: str, device_name: str, options: list[str], log: str) -> Path:

@@ -564,6 +564,18 @@ class Boats:
         return (s["pos"][:, :3].astype(np.float64).copy(),
                 s["quat"].astype(np.float64).copy())
 
+    def mesh_transforms(self) -> np.ndarray:
+        """world_from_mesh (n, 3, 4) of the boats now, float64 from their records (host copy):
+        the rows the bodies kernel writes into the transform buffer."""
+        s = self.state()
+        out = np.empty((len(s), 3, 4))
+        for i, r in enumerate(s):
+            R = matrix_from_quat(r["quat"])
+            base = np.stack([r["base_r0"], r["base_r1"], r["base_r2"]]).astype(np.float64)
+            out[i] = R @ base
+            out[i][:, 3] += r["pos"][:3]
+        return out
+
     def velocities(self) -> tuple[np.ndarray, np.ndarray]:
         """Linear (n, 3) m/s and angular (n, 3) rad/s velocities."""
         s = self.state()
@@ -579,24 +591,68 @@ class Boats:
         b = self.rt.to_host(self.sim.bed_buffer, np.float32, n)
         return (z - b).reshape(self.sim.ny, self.sim.nx)
 
-    def place(self, index: int, position) -> None:
-        """Move boat ``index``'s centre of mass to ``position`` (world m), upright and at rest:
-        a boat dropped from above (the window's B key). A host round trip: not per frame."""
-        if not 0 <= index < len(self.names):
-            raise ValueError(f"place: boat index {index} out of range [0, {len(self.names)})")
+    def _index(self, what: str, index: int) -> int:
+        if isinstance(index, bool) or not isinstance(index, int | np.integer) or not (
+                0 <= index < len(self.names)):
+            raise ValueError(f"{what}: boat index {index!r} out of range [0, {len(self.names)})")
+        return self._slots[int(index)]
+
+    def place(self, index: int, position, *, heading: float | None = 0.0, velocity=None,
+              hold: bool = False) -> None:
+        """Move boat ``index``'s centre of mass to ``position`` (world m), upright, turned
+        ``heading`` rad about +y from its placed frame (None: keeps its heading now), at rest
+        or moving at ``velocity`` (m/s): a boat dropped from above (the window's B key).
+        ``hold``: it stays there, at rest, its hull pressing on the water, until
+        :meth:`release`. A host round trip (it waits for the queue): not per frame."""
+        k = self._index("place", index)
+        pos = _finite3("position", position)
+        vel = np.zeros(3) if velocity is None else _finite3("velocity", velocity)
         self._sync_host()
-        k = self._slots[index]
-        self._host[k]["pos"][:3] = _finite3("position", position)
-        self._host[k]["quat"] = (1.0, 0.0, 0.0, 0.0)
-        self._host[k]["vel"][:3] = 0.0
+        if heading is None:   # the body's x axis projected on the horizontal plane
+            R = matrix_from_quat(self._host[k]["quat"])
+            heading = math.atan2(-R[2, 0], R[0, 0]) if math.hypot(R[0, 0], R[2, 0]) > 1e-6 \
+                else 0.0
+        if not math.isfinite(heading):
+            raise ValueError(f"place: heading={heading!r} must be finite (rad)")
+        self._host[k]["pos"][:3] = pos
+        self._host[k]["quat"] = (math.cos(heading / 2), 0.0, math.sin(heading / 2), 0.0)
+        self._host[k]["vel"][:3] = 0.0 if hold else vel
         self._host[k]["omega"][:3] = 0.0
+        self._host[k]["flags"][1] = int(bool(hold))
         cl.enqueue_copy(self.rt.queue, self._bodies, self._host)
+
+    def release(self, index: int, velocity=None) -> None:
+        """Let a held boat go (see :meth:`place`), at rest or moving at ``velocity`` (m/s)."""
+        k = self._index("release", index)
+        vel = None if velocity is None else _finite3("velocity", velocity)
+        self._sync_host()
+        self._host[k]["flags"][1] = 0
+        if vel is not None:
+            self._host[k]["vel"][:3] = vel
+        cl.enqueue_copy(self.rt.queue, self._bodies, self._host)
+
+    def held(self, index: int) -> bool:
+        """Whether boat ``index`` is held (host record, no device read)."""
+        return bool(self._host[self._index("held", index)]["flags"][1])
+
+    def rest_position(self, index: int, x: float, z: float, keel: float | None = None):
+        """World position of boat ``index``'s centre of mass upright over world (x, z) with its
+        keel ``keel`` m above the still water (None: at its rest draft, afloat). No device read."""
+        k = self._index("rest_position", index)
+        hull = self._hulls[k]
+        level = float(self._host[k]["torque"][3])      # the still water with the boats in it
+        if keel is None:
+            y = level - hull.rest_level(float(self._host[k]["pos"][3]), self.rho)
+        else:
+            y = level + float(keel) - hull.bottom
+        return np.array([float(x), y, float(z)])
 
     def set_velocity(self, index: int, velocity) -> None:
         """Set boat ``index``'s velocity (m/s): a push or a tow (a host round trip)."""
+        k = self._index("set_velocity", index)
+        vel = _finite3("velocity", velocity)
         self._sync_host()
-        k = self._slots[index]
-        self._host[k]["vel"][:3] = _finite3("velocity", velocity)   # w: the keel depth
+        self._host[k]["vel"][:3] = vel   # w: the keel depth
         cl.enqueue_copy(self.rt.queue, self._bodies, self._host)
 
 

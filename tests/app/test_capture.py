@@ -168,3 +168,17 @@ def test_odd_scene_size_fails_before_anything_is_written(tmp_path, capsys):
     assert main(["capture", str(scene), "-o", str(tmp_path / "v.mp4"), "--frames", "2"]) == 2
     assert "even" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["odd.toml"]
+
+
+def test_a_failure_before_the_first_frame_leaves_no_partial_file(scene, tmp_path, capsys,
+                                                                 monkeypatch):
+    import app.frames
+
+    def broken(*a, **k):
+        raise KeyboardInterrupt   # Ctrl-C while the World is being built
+
+    monkeypatch.setattr(app.frames, "open_world", broken)
+    out = tmp_path / "v.mp4"
+    assert main(["capture", str(scene), "-o", str(out), "--frames", "2", "--quiet"]) == 130
+    assert not out.exists() and not (tmp_path / "v.partial.mp4").exists()
+    assert list(tmp_path.iterdir()) == [scene]

@@ -4,6 +4,7 @@ Ctrl-C stops the actors and leaves a playable partial video; a two-point sweep o
 writes the rows 1 worker writes (timings aside); a missing Ray is one line naming the extra."""
 
 import json
+import os
 import sys
 
 import pytest
@@ -20,10 +21,22 @@ TIMINGS = {"fps", "frame_wall_ms", "kernel_ms", "stages_ms", "date"}
 
 
 @pytest.fixture(scope="module")
-def local_ray():
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR", log_to_driver=False)
-    yield ray
-    ray.shutdown()
+def fault_dir(tmp_path_factory):
+    """The actors' fault hook folder (app.cluster.FAULT_ENV): armed by a test, it makes the
+    first actor asked for its second frame exit."""
+    return tmp_path_factory.mktemp("fault")
+
+
+@pytest.fixture(scope="module")
+def local_ray(fault_dir):
+    os.environ[cluster.FAULT_ENV] = str(fault_dir)   # the actors' processes inherit it
+    try:
+        ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR",
+                 log_to_driver=False)
+        yield ray
+        ray.shutdown()
+    finally:
+        os.environ.pop(cluster.FAULT_ENV, None)
 
 
 @pytest.fixture(scope="module")
@@ -63,21 +76,25 @@ def test_capture_on_two_workers_equals_the_single_process_capture(local_ray, sce
     assert len(seen[-1][1]) == 2                        # two actors, two processes
 
 
-def test_a_worker_killed_mid_run_has_its_frames_rendered_elsewhere(local_ray, scene, single,
-                                                                   tmp_path, monkeypatch):
-    killed = []
-
-    def kill_one(pool, done):
-        if done == 2:
-            victim = pool.live[0]
-            killed.append(pool.info[victim]["pid"])
-            ray.kill(victim, no_restart=True)
-
-    seen = _watch(monkeypatch, kill_one)
+def test_a_worker_killed_mid_run_has_its_frames_rendered_elsewhere(local_ray, fault_dir, scene,
+                                                                   single, tmp_path,
+                                                                   monkeypatch):
+    """The fault hook makes the first actor asked for its second frame exit (os._exit) inside
+    that render call: the frame is in flight on a dead process, so it must be rendered again
+    by the other actor or a replacement, and the video is still the single-process one."""
+    (fault_dir / "arm").write_text("")
+    seen = _watch(monkeypatch, lambda pool, done: None)
     out = tmp_path / "killed.mp4"
     assert main(["capture", str(scene), "-o", str(out), "--workers", "2", *CAPTURE]) == 0
-    assert killed and out.read_bytes() == single
-    assert all(killed[0] not in pids for done, pids in seen if done > 3)
+    died = [p.name.split("_") for p in fault_dir.glob("died_*")]
+    assert len(died) == 1 and not (fault_dir / "arm").exists()   # exactly one actor died
+    pid, frame = int(died[0][1]), int(died[0][2])
+    assert 1 <= frame < 8
+    assert out.read_bytes() == single                  # its frame was rendered again, elsewhere
+    assert [d for d, _ in seen] == list(range(1, 9))
+    # once its frame was written (re-rendered), the dead actor is no longer among the live ones
+    assert all(pid not in pids for done, pids in seen if done > frame)
+    assert not (tmp_path / "killed.partial.mp4").exists()
 
 
 def test_ctrl_c_stops_the_workers_and_leaves_a_playable_partial_video(local_ray, scene,
@@ -96,6 +113,14 @@ def test_ctrl_c_stops_the_workers_and_leaves_a_playable_partial_video(local_ray,
     assert not out.exists() and len(_decode(partial)[1]) == 3
     with pytest.raises(ray.exceptions.RayActorError):
         ray.get(actors[0].info.remote(), timeout=60)
+
+
+def test_a_pool_that_cannot_start_leaves_no_partial_file(local_ray, scene, tmp_path, capsys):
+    out = tmp_path / "v.mp4"
+    assert main(["capture", str(scene), "-o", str(out), "--workers", "3", *CAPTURE]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the Ray cluster has 2 CPUs" in err[0]
+    assert list(tmp_path.iterdir()) == []
 
 
 def _rows(path):

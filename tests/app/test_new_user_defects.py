@@ -110,6 +110,91 @@ def test_ctrl_c_is_one_line_and_status_130(tmp_path, delay):
     assert not (tmp_path / "o.png").exists() and not list(tmp_path.glob("*.partial*"))
 
 
+@pytest.mark.parametrize("delay", [0.0, 0.005, 0.02, 0.05, 0.15, 0.4])
+def test_ctrl_c_through_the_console_entry_is_one_line_from_its_first_statement(tmp_path, delay):
+    """As the ``lbwater`` console script does (``from app.entry import main``): an interrupt
+    right after app.entry is imported lands in the imports of app.cli, argparse, numpy and the
+    command module, or in the parser, or later: always one line and status 130."""
+    env = {**ENV, "POCL_CACHE_DIR": str(tmp_path / "kcache")}
+    code = ("import sys; from app.entry import main; print('ready', file=sys.stderr, flush=True);"
+            f" sys.exit(main(['render', 'scenes/pool.toml', '-o', {str(tmp_path / 'o.png')!r},"
+            " '--width', '32', '--height', '24']))")
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stderr.readline() == "ready\n"
+    time.sleep(delay)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=120)
+    lines = [ln for ln in err.splitlines() if not ln.startswith("lbwater: building kernels")]
+    assert p.returncode in (130, -signal.SIGINT), err
+    assert lines == ["lbwater: interrupted"], err
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_an_interrupt_swallowed_by_a_callback_is_delivered_again(monkeypatch, capsys):
+    """A Ctrl-C that lands in code whose exceptions Python only reports (importlib's module-lock
+    weakref callback, a __del__) used to print 'Exception ignored ... KeyboardInterrupt' and
+    let the command run on; main() delivers it again: one line and 130."""
+    import types
+
+    import app.cli as cli
+
+    class Bomb:
+        def __del__(self):
+            raise KeyboardInterrupt   # as if the signal came while this ran
+
+    def run(args):
+        Bomb()                        # __del__ runs here, its exception "ignored"
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            time.sleep(0.001)         # the interrupt, delivered again, lands here
+        return 0
+
+    mod = types.ModuleType("fake_cmd")
+    mod.add_arguments, mod.run = (lambda p: None), run
+    monkeypatch.setitem(sys.modules, "fake_cmd", mod)
+    monkeypatch.setattr(cli, "COMMANDS", [("fake", "fake_cmd", "a test command")])
+    hook = sys.unraisablehook
+    assert cli.main(["fake"]) == 130
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == ["lbwater: interrupted"], err
+    assert sys.unraisablehook is hook                      # main() put the hook back
+
+
+def test_console_script_and_module_run_install_the_handler_before_any_import():
+    """``lbwater`` is app.entry:main, whose module imports only os, signal and sys before it
+    installs the handler; ``python -m app.cli`` installs it before importing anything but sys."""
+    import ast
+    import tomllib
+
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["lbwater"] == "app.entry:main"
+
+    def head(path):   # module-level statements up to the first that is not an import
+        body = ast.parse((ROOT / path).read_text()).body
+        out = []
+        for node in body:
+            if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant):
+                continue   # the docstring
+            out.append(node)
+        return out
+
+    entry = head("app/entry.py")
+    imports = [n for n in entry[:entry.index(next(n for n in entry if isinstance(
+        n, ast.FunctionDef)))] if isinstance(n, ast.Import | ast.ImportFrom)]
+    assert {a.name for n in imports for a in n.names} == {"os", "signal", "sys"}
+    calls = [n for n in entry if isinstance(n, ast.Expr) and isinstance(n.value, ast.Call)]
+    assert [c.value.func.id for c in calls] == ["install"]
+    cli = head("app/cli.py")
+    assert isinstance(cli[0], ast.ImportFrom) and cli[0].module == "__future__"
+    assert isinstance(cli[1], ast.Import) and [a.name for a in cli[1].names] == ["sys"]
+    guard = cli[2]
+    assert isinstance(guard, ast.If) and "__main__" in ast.unparse(guard.test)
+    assert "install()" in ast.unparse(guard)
+    later = [n for n in cli[3:] if isinstance(n, ast.Import | ast.ImportFrom)]
+    assert later == []   # argparse, importlib: inside the functions
+
+
 def test_interrupt_during_a_build_waits_for_the_compiler(rt):
     from kernels.runtime import _build_guard
 

@@ -56,3 +56,48 @@ def test_vtk_unwritable_folder_fails_before_simulating(tmp_path, capsys):
     assert main(["simulate", str(scene), "--vtk", str(blocker / "sub"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(blocker / "sub") in err[0]
+
+
+def test_boats_series_places_each_mesh_by_the_saved_pose(tmp_path):
+    """boats.pvd: at the start the mesh sits where the scene puts it (the renderer's placement,
+    app.assets.mesh_transform); at the end it is the file's mesh moved by the pose simulate
+    --save writes: vertices = R(q) (V - c) + p, c the box's centroid (0, 0.1, 0) analytically
+    (size 0 keeps the file's frame; no mass_height: the centre of mass is the centroid)."""
+    from app.assets import mesh_transform
+    from app.meshes import load_mesh
+    from lbm.bodies import matrix_from_quat
+    from tests.lbm.test_cmd_simulate import BOX_OBJ
+
+    (tmp_path / "box.obj").write_text(BOX_OBJ)
+    scene = tmp_path / "b.toml"
+    scene.write_text("""
+[water]
+size = [1.6, 1.0]
+cells = [32, 20]
+depth = 0.3
+viscosity = 1e-3
+
+[[boats]]
+file = "box.obj"
+mass = 9.0
+position = [0.8, 0.33, 0.5]
+rotation = [0.0, 30.0, 10.0]
+""")
+    npz, vtk = tmp_path / "b.npz", tmp_path / "vtk"
+    assert main(["simulate", str(scene), "--steps", "60", "--save", str(npz), "--vtk", str(vtk),
+                 "--every", "40", "--quiet"]) == 0
+    water, boats = read_series(vtk / "water.pvd"), read_series(vtk / "boats.pvd")
+    assert [t for t, _ in boats] == [t for t, _ in water] and len(boats) == 3   # 0, 40, 60
+    V, F = load_mesh(tmp_path / "box.obj")   # the rendered mesh, as the scene loads it
+    first, last = boats[0][1], boats[-1][1]
+    assert last.n_points == len(V) and last.n_cells == len(F)
+    assert set(np.asarray(last.cell_data["boat"]).tolist()) == {0}
+    M0 = mesh_transform(V, (0.8, 0.33, 0.5), (0.0, 30.0, 10.0), 0.0)
+    np.testing.assert_allclose(first.points, V @ M0[:3, :3].T + M0[:3, 3], atol=2e-6)
+    saved = np.load(npz)
+    p, q = saved["boat_position"][0], saved["boat_rotation"][0]
+    want = (V - (0.0, 0.1, 0.0)) @ matrix_from_quat(q).T + p
+    np.testing.assert_allclose(last.points, want, atol=2e-6)
+    assert np.abs(want - first.points).max() > 1e-3          # the boat moved in between
+    tri = np.asarray(last.faces).reshape(-1, 4)
+    assert (tri[:, 0] == 3).all() and np.array_equal(tri[:, 1:], F)

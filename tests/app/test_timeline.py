@@ -116,4 +116,5 @@ def test_the_shipped_timeline_scene_validates():
     scene = load_scene(root / "scenes" / "timeline.toml")
     tl = Timeline(scene, 30)
     kinds = {type(e).__name__ for e in scene.timeline}
-    assert kinds == {"CameraKey", "Drop", "Push", "Rain"} and tl.duration >= 3.5
+    assert kinds == {"BoatEvent", "CameraKey", "Drop", "Push", "Rain"} and tl.duration >= 3.5
+    assert [b.name for b in scene.boats] == ["sailboat"]

@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# The H200 runs that need ffmpeg (BENCHMARKS.md "Capture"): capture's overhead over the bare frame
+# loop at 1920x1080, and the README's caustics clip. Usage: bench/h200_capture.sh OUTDIR
+# (IMAGEIO_FFMPEG_EXE names an ffmpeg with libx264; the device machine has none of its own).
+set -uo pipefail
+out=${1:?OUTDIR}
+mkdir -p "$out"
+lb() { python3 -m app.cli "$@"; }
+lb bench capture --cells 1024 --size 1920 1080 --frames 120 --out "$out/capture1080" | tail -1
+lb capture scenes/timeline.toml -o "$out/caustics_clip.mp4" --width 960 --height 540 --fps 30 \
+    --seconds 6 --spp 4 --force 2>&1 | tail -1
