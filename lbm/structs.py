@@ -9,7 +9,7 @@ PARAMS_DTYPE = np.dtype([
     ("nx", "<i4"), ("ny", "<i4"), ("n_cells", "<i4"),
     ("dx", "<f4"), ("e", "<f4"), ("g_lat", "<f4"), ("drag", "<f4"),
     ("h_min", "<f4"), ("u2_max", "<f4"), ("fr2_max", "<f4"),
-    ("rest0", "<f4"), ("rest_axis", "<f4"), ("rest_diag", "<f4"), ("pad0", "<f4"),
+    ("rest0", "<f4"), ("rest_axis", "<f4"), ("rest_diag", "<f4"), ("quantum", "<f4"),
 ])
 
 #: LbmGuard, 112 bytes: the guard's device record, read by the host once per frame.
