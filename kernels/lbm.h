@@ -126,11 +126,13 @@ typedef struct {
     uint pad0, pad1;
 } LbmGuard;
 
-/* 32 bytes: one work-group's partial reduction. */
+/* 32 bytes: one work-group's partial reduction. The depth sum is a float pair: mass + mass_lo
+ * (compensated summation, lbm_reduce.cl), so the total is right to float32 rounding. */
 typedef struct {
     float mass, max_u2, max_fr2, min_h;
     uint nan_cells, damped_cells;
-    uint pad0, pad1;
+    float mass_lo;
+    uint pad1;
 } LbmPartial;
 
 /* 48 bytes: a drop or a push, applied over the cell box [i0, i0+w) x [j0, j0+h) (the launch). */

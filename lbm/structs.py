@@ -27,7 +27,7 @@ GUARD_DTYPE = np.dtype([
 #: LbmPartial, 32 bytes: one work-group's partial reduction.
 PARTIAL_DTYPE = np.dtype([
     ("mass", "<f4"), ("max_u2", "<f4"), ("max_fr2", "<f4"), ("min_h", "<f4"),
-    ("nan_cells", "<u4"), ("damped_cells", "<u4"), ("pad0", "<u4"), ("pad1", "<u4"),
+    ("nan_cells", "<u4"), ("damped_cells", "<u4"), ("mass_lo", "<f4"), ("pad1", "<u4"),
 ])
 
 #: LbmSource, 48 bytes: a drop or a push, its launch box and the volume it asks for.
