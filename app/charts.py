@@ -49,6 +49,22 @@ def figure(title: str, xlabel: str, ylabel: str, *, log: Sequence[str] = (),
     return fig, ax
 
 
+def panels(title: str, n: int, *, size: tuple[float, float] = (6.4, 4.0)):
+    """A figure of ``n`` side-by-side axes in the house style under one title: (fig, [axes])."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, n, figsize=size, squeeze=False)
+    fig.suptitle(title, fontsize=9)
+    return fig, list(axes[0])
+
+
+def marker_handle(colour, marker: str, label: str):
+    """A legend entry for scattered markers (for ``fig.legend(handles=...)``)."""
+    from matplotlib.lines import Line2D
+
+    return Line2D([], [], linestyle="none", marker=marker, color=colour, markersize=7,
+                  label=label)
+
+
 def series(ax, xs, ys, *, label: str | None = None, notes: Sequence[str] | None = None,
            index: int | None = None, line: bool = True):
     """One series of points (and a line through them), each point optionally annotated."""
@@ -105,9 +121,11 @@ def _plain_log_labels(ax) -> None:
         axis.set_tick_params(which="minor", labelsize=7)
 
 
-def save(fig, path: str | os.PathLike, *, source: str | None = None) -> None:
+def save(fig, path: str | os.PathLike, *, source: str | None = None,
+         bottom: float = 0.02) -> None:
     """Write ``fig`` as a PNG atomically (temporary file, then rename) and close it. ``source``
-    is a small footnote (device, date, mode) so a chart never travels without its provenance."""
+    is a small footnote (device, date, mode) so a chart never travels without its provenance;
+    ``bottom``: the figure fraction kept free below the axes (a figure legend)."""
     from app.io import atomic_path
 
     plt = _plt()
@@ -118,7 +136,7 @@ def save(fig, path: str | os.PathLike, *, source: str | None = None) -> None:
         fig.text(0.99, 0.005, source, ha="right", va="bottom", fontsize=6, color="0.4")
     for a in fig.axes:
         _plain_log_labels(a)
-    fig.tight_layout(rect=(0, 0.02, 1, 1))
+    fig.tight_layout(rect=(0, bottom, 1, 1))
     try:
         with atomic_path(path, suffix=".partial.png") as tmp:
             fig.savefig(tmp, format="png")

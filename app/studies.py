@@ -24,6 +24,10 @@ speed against accuracy"):
                      error against a high-photon reference of the same water, frame-to-frame
                      flicker of still water (only the jitter changes) without and with the
                      temporal blend, and the caustics stage's device ms.
+``stability``        where the methods fail: the plain LBM and the guarded one over depth, tau
+                     and disturbances (drops, a dip, pushes at Froude 0.3-2.5, dam breaks);
+                     blow-ups, what the guard did, Stoker and volume errors
+                     (app/study_stability.py). A map, not an error-against-time chart.
 
 ``--quick`` runs each at the tiny size the tests use (seconds on PoCL); times then measure a
 shared CPU, not a GPU: read the charts' shapes, not their numbers.
@@ -39,6 +43,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from app import study_stability
 
 G = 9.81
 
@@ -665,6 +671,8 @@ STUDIES = {s.name: s for s in (
           "image change when the grid is refined, vs pixels per cell"),
     Study("caustics-noise", caustics_noise, caustics_noise_chart,
           "caustic map error and flicker against photons per frame"),
+    Study("stability", study_stability.stability, study_stability.stability_chart,
+          "plain vs guarded LBM over depth, tau and disturbances: blow-ups and guard actions"),
 )}
 
 

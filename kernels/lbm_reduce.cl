@@ -1,5 +1,6 @@
-/* The guard's device reduction: total depth (mass), max (|u|/e)^2, max Froude^2, min depth, the
- * count of non-finite cells and of cells with a damping mark, in two stages (no float atomics):
+/* The guard's device reduction: total depth (mass, a compensated sum), max (|u|/e)^2, max
+ * Froude^2, min depth, the count of non-finite cells and of cells with a damping mark, in two
+ * stages (no float atomics):
  * lbm_reduce_partial (many work-groups of LBM_REDUCE_WG, grid-stride over the cells) then
  * lbm_reduce_final (one work-group) which also keeps the volume budget and decides the guard's
  * action (lbm_guard.cl applies it). The guard never changes tau: damping is local (lbm_step.cl).
@@ -7,11 +8,23 @@
 #include "lbm.h"
 
 /* Accumulators are LbmPartial values (lbm.h), the layout the partials are stored in. */
-#define LBM_ACC_ZERO {0.0f, 0.0f, 0.0f, INFINITY, 0u, 0u, 0u, 0u}
+#define LBM_ACC_ZERO {0.0f, 0.0f, 0.0f, INFINITY, 0u, 0u, 0.0f, 0u}
+
+/* The depth sum as a float pair (hi, lo): hi + x by Knuth's TwoSum, its rounding error into lo
+ * (exact; FP_CONTRACT is off in lbm.h). A plain float32 sum of 10^6 depths is off by up to
+ * ~1e-7 of the total, the size of the volume drift the guard watches for. */
+void lbm_sum2(float* hi, float* lo, const float x)
+{
+    const float s = *hi + x;
+    const float bp = s - *hi;
+    *lo += (*hi - (s - bp)) + (x - bp);
+    *hi = s;
+}
 
 void lbm_acc_merge(LbmPartial* a, const LbmPartial b)
 {
-    a->mass += b.mass;
+    lbm_sum2(&a->mass, &a->mass_lo, b.mass);
+    a->mass_lo += b.mass_lo;
     a->max_u2 = fmax(a->max_u2, b.max_u2);
     a->max_fr2 = fmax(a->max_fr2, b.max_fr2);
     a->min_h = fmin(a->min_h, b.min_h);
@@ -20,12 +33,13 @@ void lbm_acc_merge(LbmPartial* a, const LbmPartial b)
 }
 
 /* Tree reduction of one work-group's accumulators; the result is valid in work-item 0. */
-LbmPartial lbm_acc_reduce_local(LbmPartial acc, __local float* l_mass, __local float* l_u2,
-                                __local float* l_fr2, __local float* l_h, __local uint* l_nan,
-                                __local uint* l_damp)
+LbmPartial lbm_acc_reduce_local(LbmPartial acc, __local float* l_mass, __local float* l_lo,
+                                __local float* l_u2, __local float* l_fr2, __local float* l_h,
+                                __local uint* l_nan, __local uint* l_damp)
 {
     const int lid = get_local_id(0);
     l_mass[lid] = acc.mass;
+    l_lo[lid] = acc.mass_lo;
     l_u2[lid] = acc.max_u2;
     l_fr2[lid] = acc.max_fr2;
     l_h[lid] = acc.min_h;
@@ -34,7 +48,10 @@ LbmPartial lbm_acc_reduce_local(LbmPartial acc, __local float* l_mass, __local f
     barrier(CLK_LOCAL_MEM_FENCE);
     for (int s = LBM_REDUCE_WG / 2; s > 0; s >>= 1) {
         if (lid < s) {
-            l_mass[lid] += l_mass[lid + s];
+            float hi = l_mass[lid], lo = l_lo[lid] + l_lo[lid + s];
+            lbm_sum2(&hi, &lo, l_mass[lid + s]);
+            l_mass[lid] = hi;
+            l_lo[lid] = lo;
             l_u2[lid] = fmax(l_u2[lid], l_u2[lid + s]);
             l_fr2[lid] = fmax(l_fr2[lid], l_fr2[lid + s]);
             l_h[lid] = fmin(l_h[lid], l_h[lid + s]);
@@ -43,13 +60,13 @@ LbmPartial lbm_acc_reduce_local(LbmPartial acc, __local float* l_mass, __local f
         }
         barrier(CLK_LOCAL_MEM_FENCE);
     }
-    LbmPartial out = {l_mass[0], l_u2[0], l_fr2[0], l_h[0], l_nan[0], l_damp[0], 0u, 0u};
+    LbmPartial out = {l_mass[0], l_u2[0], l_fr2[0], l_h[0], l_nan[0], l_damp[0], l_lo[0], 0u};
     return out;
 }
 
 #define LBM_LOCALS                                                                             \
-    __local float l_mass[LBM_REDUCE_WG], l_u2[LBM_REDUCE_WG], l_fr2[LBM_REDUCE_WG],          \
-        l_h[LBM_REDUCE_WG];                                                                    \
+    __local float l_mass[LBM_REDUCE_WG], l_lo[LBM_REDUCE_WG], l_u2[LBM_REDUCE_WG],           \
+        l_fr2[LBM_REDUCE_WG], l_h[LBM_REDUCE_WG];                                              \
     __local uint l_nan[LBM_REDUCE_WG], l_damp[LBM_REDUCE_WG]
 
 __kernel __attribute__((reqd_work_group_size(LBM_REDUCE_WG, 1, 1)))
@@ -71,7 +88,7 @@ void lbm_reduce_partial(__global const LBM_FT* restrict f, __global const uchar*
             acc.nan_cells += 1u;
             continue;
         }
-        acc.mass += h;
+        lbm_sum2(&acc.mass, &acc.mass_lo, h);
         acc.min_h = fmin(acc.min_h, h);
         if (h > 0.0f) {
             const float u2 = (mx * mx + my * my) / (h * h);
@@ -79,7 +96,7 @@ void lbm_reduce_partial(__global const LBM_FT* restrict f, __global const uchar*
             acc.max_fr2 = fmax(acc.max_fr2, u2 / (p.g_lat * h));
         }
     }
-    acc = lbm_acc_reduce_local(acc, l_mass, l_u2, l_fr2, l_h, l_nan, l_damp);
+    acc = lbm_acc_reduce_local(acc, l_mass, l_lo, l_u2, l_fr2, l_h, l_nan, l_damp);
     if (get_local_id(0) == 0) {
         partials[get_group_id(0)] = acc;
     }
@@ -99,8 +116,9 @@ void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
     for (int k = get_local_id(0); k < n_partials; k += LBM_REDUCE_WG) {
         lbm_acc_merge(&acc, partials[k]);
     }
-    acc = lbm_acc_reduce_local(acc, l_mass, l_u2, l_fr2, l_h, l_nan, l_damp);
+    acc = lbm_acc_reduce_local(acc, l_mass, l_lo, l_u2, l_fr2, l_h, l_nan, l_damp);
     if (get_local_id(0) != 0) return;
+    acc.mass += acc.mass_lo;   /* the pair's float32 value */
 
     if (g->checks == 0u) g->mass0 = acc.mass;
     g->checks += 1u;

@@ -17,7 +17,7 @@ void lbm_source_read(__global const LBM_FT* f, const LbmParams p, const int n, f
 }
 
 /* Move cell n from (h, U) to (h2, U2), after the limiter, keeping the non-equilibrium part.
- * Returns the new depth. */
+ * Returns the new depth (as stored). */
 float lbm_source_apply(__global LBM_FT* f, const LbmParams p, const int n, const float* fl,
                        const float h, const float ux, const float uy, float h2, float ux2,
                        float uy2, __global uchar* mark, __global LbmGuard* guard)
@@ -36,8 +36,18 @@ float lbm_source_apply(__global LBM_FT* f, const LbmParams p, const int n, const
     float feq_old[9], feq_new[9];
     lbm_equilibrium(h, ux, uy, p.g_lat, feq_old);
     lbm_equilibrium(h2, ux2, uy2, p.g_lat, feq_new);
-    for (int a = 0; a < 9; ++a) lbm_store(f, a, n, p, fl[a] + (feq_new[a] - feq_old[a]));
-    return h2;
+    /* changes are multiples of the quantum (lbm.h lbm_quantize) and the rest population takes
+     * the rounded change of depth less the others': a push changes no volume, exactly */
+    const float q = p.quantum;
+    float moved = 0.0f;
+    for (int a = 1; a < 9; ++a) {
+        const float da = lbm_quantize(feq_new[a] - feq_old[a], q);
+        moved += da;
+        lbm_store(f, a, n, p, fl[a] + da);
+    }
+    const float dh = lbm_quantize(h2 - h, q);
+    lbm_store(f, 0, n, p, fl[0] + (dh - moved));
+    return h + dh;
 }
 
 /* A drop: a raised-cosine bump dh = amount (1 + cos(pi r / radius)) / 2 for r < radius, added

@@ -177,3 +177,19 @@ def equilibrium(h: np.ndarray, ux: np.ndarray, uy: np.ndarray, g_lat: float) -> 
         cu = CX[a] * ux + CY[a] * uy
         feq[a] = W[a] * (0.5 * g_lat * h * h + h * cu + 1.5 * h * cu * cu - 0.5 * h * u2)
     return feq
+
+
+def equilibrium_f32(h, ux, uy, g_lat: float) -> np.ndarray:
+    """Zhou's equilibrium (9, ...) in float32 with the operations of kernels/lbm.h
+    ``lbm_equilibrium`` in their order: at rest (ux = uy = 0) its bits are the kernel's."""
+    f = np.float32
+    h, ux, uy, g = (np.asarray(v, f) for v in (h, ux, uy, g_lat))
+    u2 = ux * ux + uy * uy
+    base = f(0.5) * g * h * h - f(0.5) * h * u2
+    a, b = ux + uy, uy - ux
+    out = np.empty((9,) + h.shape, f)
+    for k, w, c in ((1, 1 / 3, ux), (3, 1 / 3, uy), (2, 1 / 12, a), (4, 1 / 12, b)):
+        out[k] = f(w) * (base + h * c + f(1.5) * h * c * c)
+        out[k + 4] = f(w) * (base - h * c + f(1.5) * h * c * c)
+    out[0] = h - (((out[1] + out[5]) + (out[3] + out[7])) + ((out[2] + out[6]) + (out[4] + out[8])))
+    return out

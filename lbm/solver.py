@@ -21,7 +21,7 @@ import numpy as np
 import pyopencl as cl
 
 from kernels import Runtime, get_runtime
-from lbm.lattice import GH_LIMIT, Lattice, Options, choose_lattice, equilibrium
+from lbm.lattice import GH_LIMIT, Lattice, Options, choose_lattice, equilibrium, equilibrium_f32
 from lbm.limits import check_grid
 from lbm.structs import GUARD_DTYPE, PARAMS_DTYPE, PARTIAL_DTYPE, SOURCE_DTYPE, record
 
@@ -326,8 +326,13 @@ class ShallowWater:
         self._uneven = bool(np.ptp(bed) > 0)
         self._set_params(lat, float(h.mean()))
         q = self.rt.queue
-        self._store_populations(equilibrium(h, u / lat.e, v / lat.e, lat.g_lat))
-        h32 = h.astype(np.float32)
+        if self.storage is Storage.FP16S:
+            self._store_populations(equilibrium(h, u / lat.e, v / lat.e, lat.g_lat))
+            h32 = h.astype(np.float32)
+        else:   # the kernel's float32 equilibrium of the stored depth: a lake at rest is exact
+            h32 = self._quantized(h).astype(np.float32)
+            self._store_populations(equilibrium_f32(h32, u / lat.e, v / lat.e, lat.g_lat),
+                                    depth=h32)
         cl.enqueue_copy(q, self._h.current, h32)
         cl.enqueue_copy(q, self._bed, bed.astype(np.float32))
         if self._zforce is not self._bed:
@@ -364,18 +369,41 @@ class ShallowWater:
             PARAMS_DTYPE, nx=self.nx, ny=self.ny, n_cells=self.n_cells, dx=self.dx, e=lat.e,
             g_lat=lat.g_lat, drag=lat.drag * lat.dt, h_min=lat.min_depth,
             u2_max=lat.max_speed_ratio**2, fr2_max=lat.max_froude**2, rest0=rest[0],
-            rest_axis=rest[1], rest_diag=rest[2])
+            rest_axis=rest[1], rest_diag=rest[2], quantum=self._quantum(lat))
+
+    def _quantum(self, lat: Lattice) -> float:
+        """float32 storage: the power of two every population is kept a multiple of, 2^-24 of
+        the smallest power of two above the depth cap (kernels/lbm.h lbm_quantize: the volume
+        is then conserved exactly). 0 for fp16s storage."""
+        if self.storage is Storage.FP16S:
+            return 0.0
+        _, k = math.frexp(GH_LIMIT / float(np.float32(lat.g_lat)))
+        return math.ldexp(1.0, k - 24)
 
     def _rest_planes(self) -> np.ndarray:
         """(9, 1, 1) float32: the rest population of each direction (0 for fp32 storage)."""
         r = np.array([self._rest[0]] + [self._rest[1], self._rest[2]] * 4, np.float32)
         return r.reshape(9, 1, 1)
 
-    def _store_populations(self, f) -> None:
-        """Write populations (9, ny, nx) into f.current in the storage's format."""
-        f32 = np.ascontiguousarray(f, np.float32).reshape(9, self.ny, self.nx)
-        if self.storage is Storage.FP16S:
-            f32 = (f32 - self._rest_planes()).astype(np.float16)
+    def _quantized(self, x) -> np.ndarray:
+        """``x`` rounded to multiples of the quantum (float64)."""
+        q = float(self._params["quantum"])
+        return np.rint(np.asarray(x, np.float64) / q) * q
+
+    def _store_populations(self, f, quantize: bool = True, depth=None) -> None:
+        """Write populations (9, ny, nx) into f.current in the storage's format. float32 (unless
+        not ``quantize``): the moving ones rounded to multiples of the quantum, as the kernels
+        keep them, and the rest population the rounded depth (``depth``, default the sum of
+        ``f``) less them, so that the stored depth is the rounded one exactly."""
+        if self.storage is Storage.FP16S or not quantize:
+            f32 = np.asarray(f, np.float32).reshape(9, self.ny, self.nx)
+            if self.storage is Storage.FP16S:
+                f32 = (f32 - self._rest_planes()).astype(np.float16)
+        else:
+            f64 = np.asarray(f, np.float64).reshape(9, self.ny, self.nx)
+            fq = self._quantized(f64)
+            fq[0] = self._quantized(f64.sum(0) if depth is None else depth) - fq[1:].sum(0)
+            f32 = fq.astype(np.float32)
         cl.enqueue_copy(self.rt.queue, self._f.current, np.ascontiguousarray(f32))
 
     # -- stepping ---------------------------------------------------------------------------
@@ -661,7 +689,7 @@ class ShallowWater:
         """Overwrite the stored populations (9, ny, nx) and the depth buffer (their sum) as they
         are, NaN included: for kernel tests. The next check sees whatever was loaded."""
         f = np.ascontiguousarray(f, np.float32).reshape(9, self.ny, self.nx)
-        self._store_populations(f)
+        self._store_populations(f, quantize=False)
         cl.enqueue_copy(self.rt.queue, self._h.current,
                         f.astype(np.float64).sum(0).astype(np.float32))
         self._dirty = True

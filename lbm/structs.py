@@ -9,7 +9,7 @@ PARAMS_DTYPE = np.dtype([
     ("nx", "<i4"), ("ny", "<i4"), ("n_cells", "<i4"),
     ("dx", "<f4"), ("e", "<f4"), ("g_lat", "<f4"), ("drag", "<f4"),
     ("h_min", "<f4"), ("u2_max", "<f4"), ("fr2_max", "<f4"),
-    ("rest0", "<f4"), ("rest_axis", "<f4"), ("rest_diag", "<f4"), ("pad0", "<f4"),
+    ("rest0", "<f4"), ("rest_axis", "<f4"), ("rest_diag", "<f4"), ("quantum", "<f4"),
 ])
 
 #: LbmGuard, 112 bytes: the guard's device record, read by the host once per frame.
@@ -27,7 +27,7 @@ GUARD_DTYPE = np.dtype([
 #: LbmPartial, 32 bytes: one work-group's partial reduction.
 PARTIAL_DTYPE = np.dtype([
     ("mass", "<f4"), ("max_u2", "<f4"), ("max_fr2", "<f4"), ("min_h", "<f4"),
-    ("nan_cells", "<u4"), ("damped_cells", "<u4"), ("pad0", "<u4"), ("pad1", "<u4"),
+    ("nan_cells", "<u4"), ("damped_cells", "<u4"), ("mass_lo", "<f4"), ("pad1", "<u4"),
 ])
 
 #: LbmSource, 48 bytes: a drop or a push, its launch box and the volume it asks for.

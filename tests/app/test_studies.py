@@ -55,12 +55,35 @@ def test_study_writes_csv_and_chart(rt, out, name):
         ppc = [float(r["pixels_per_cell"]) for r in rows]
         assert ppc == sorted(ppc, reverse=True) and ppc[0] > 3 * ppc[-1]
         assert float(rows[0]["diff_to_next"]) > 0
+    elif name == "stability":
+        _check_stability_map(rows)
     elif name == "caustics-noise":
         err = [float(r["error_vs_reference"]) for r in rows]
         flick = [float(r["flicker"]) for r in rows]
         assert err == sorted(err, reverse=True) and err[-1] < 0.6 * err[0]
         assert flick[-1] < 0.6 * flick[0] and float(rows[0]["flicker"]) > 0
         assert all(float(r["flicker_blended"]) < float(r["flicker"]) for r in rows)
+
+
+def _check_stability_map(rows):
+    """The coarse map has both regions; the guard keeps every run finite, and every case it
+    acted on says so in its report with the counts; where it stays idle it changes nothing."""
+    assert {r["plain_status"] for r in rows} == {"stable", "blew up"}
+    assert all(r["guard_status"] == "stable" for r in rows)           # finite, every one
+    acted = [r for r in rows if int(r["guard_cells_limited"]) + int(r["guard_restored"]) > 0]
+    assert acted and {r["category"] for r in acted} <= {"saved", "guard_only"}
+    for r in acted:
+        assert r["guard_report"] and int(r["guard_report_mismatches"]) == 0, r
+        assert int(r["guard_reported_cells"]) == int(r["guard_cells_limited"])
+        assert int(r["guard_reported_restores"]) == int(r["guard_restored"])
+    for r in rows:
+        if r["plain_status"] == "stable":
+            assert float(r["plain_volume_change"]) == 0.0   # exact volume, to the bit
+            assert float(r["guard_budget_error"]) <= 1e-6   # clipped/created book the rest
+        if r["category"] == "stable":                       # an idle guard is transparent
+            assert float(r["guard_change_l1"]) == 0.0 and not r["guard_report"]
+    calm = [r for r in rows if r["kind"] == "dam" and float(r["dam_ratio"]) == 0.5]
+    assert calm and all(float(r["guard_stoker_error"]) < 0.05 for r in calm)
 
 
 def test_fit_order_recovers_a_known_power():
