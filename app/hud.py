@@ -175,13 +175,13 @@ def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
     """The HUD's text from a FrameStats-like record (None before the first frame)."""
     lines = [f"{fps:5.1f} FPS" + ("  [paused]" if paused else "")
              + (f"  rain {rain:g}/s" if rain else "")]
-    if stats is None:
-        return lines + [f"display: {path}"]
     w, h = size
     cells = getattr(stats, "water_cells", None)
     lines.append(f"{w}x{h}  {spp} spp  {bounces} bounces  "
-                 + (f"grid {cells[0]}x{cells[1]}" if cells else "no water")
+                 + (f"grid {cells[0]}x{cells[1]}" if cells else "no water" if stats else "")
                  + (f"  caustics {caustics}" if caustics else ""))
+    if stats is None:   # before the first frame (or a rebuild's): the settings, the path
+        return lines + [f"display: {path}"]
     lines.append(f"{stats.n_triangles:,} triangles  {stats.n_rays / 1e6:.2f} M rays/frame")
     ms = sorted(stats.stage_ms.items(), key=lambda kv: -kv[1])
     kernel = sum(v for _, v in ms)

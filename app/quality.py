@@ -17,9 +17,9 @@ import math
 import time
 
 #: Fixed presets: cells along the pool's longer side (None: the scene's), render scale, bounces
-#: (None: the scene's), traced caustics (None: the scene's setting, False: off).
+#: (None: the scene's), caustics mode (None: the scene's setting, "off": off).
 PRESETS = {
-    "low": (64, 0.5, 1, False),
+    "low": (64, 0.5, 1, "off"),
     "medium": (128, 0.75, 2, None),
     "high": (None, 1.0, None, None),
 }
@@ -36,11 +36,11 @@ class Quality:
     bounces: int
     source: str       #: "auto", a preset name, or "auto (fixed: ...)"
     predicted_ms: float | None = None
-    caustics: bool | None = None   #: False: turn the scene's traced caustics off
+    caustics: str | None = None    #: caustics mode over the scene's ("off"); None: the scene's
 
     def describe(self) -> str:
         ms = "" if self.predicted_ms is None else f", predicted {self.predicted_ms:.1f} ms"
-        ca = ", caustics off" if self.caustics is False else ""
+        ca = f", caustics {self.caustics}" if self.caustics else ""
         return (f"quality {self.source}: {self.cells} cells, scale {self.scale:g}, "
                 f"{self.bounces} bounces{ca}{ms}")
 
@@ -151,8 +151,7 @@ def choose(costs: Costs, *, target_fps: float, window: tuple[int, int], max_cell
             break
     c, s, b, k, ms = best
     source = "auto" + (f" (fixed: {', '.join(pinned)})" if pinned else "")
-    return Quality(c, s, b, source, ms, caustics=None if caustics and k else
-                   (False if caustics else None))
+    return Quality(c, s, b, source, ms, caustics="off" if caustics and not k else None)
 
 
 def preset(name: str, *, max_cells: int, max_bounces: int) -> Quality:

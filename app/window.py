@@ -118,14 +118,13 @@ def require_display() -> None:
 
 
 # ---- worlds -------------------------------------------------------------------------------------
-def make_world(scene, device, *, size, spp, bounces, cells, caustics=None):
+def make_world(scene, device, *, size, spp, bounces, cells, caustics: str | None = None):
     """The World the window drives (docs/frame_api.md), ``cells`` along the pool's longer side;
-    ``caustics`` False turns the scene's traced caustics off (None keeps the scene's)."""
+    ``caustics`` a mode ("off" | "traced") over the scene's (None keeps the scene's)."""
     from app.world import World
 
     return World(scene, device, width=size[0], height=size[1], spp=spp, bounces=bounces,
-                 cells=None if scene.water is None else cells,
-                 caustics="off" if caustics is False else None)
+                 cells=None if scene.water is None else cells, caustics=caustics)
 
 
 def display_path(rt, upload: str = "pbo") -> str:
@@ -455,8 +454,7 @@ class Viewer:
         self.path = display_path(rt, upload)
         self.world = make_world(scene, rt, size=image, spp=spp, bounces=bounces,
                                 cells=self.cells, caustics=quality.caustics)
-        if quality.caustics is False:
-            self.controls.caustics = "off"
+        self.controls.caustics = quality.caustics   # C toggles from here; rebuilds keep it
         self.controls.reapply(self.world, camera=False)
         self.next_frame = 0       # index of the next frame to enqueue (event time base)
         self._size_seen = tuple(self.world.size)
@@ -593,7 +591,7 @@ class Viewer:
         size = scaled_size(c.window_size, self.quality.scale)
         self.world.close()
         self.world = make_world(self.scene, self.rt, size=size, spp=c.spp, bounces=c.bounces,
-                                cells=self.cells, caustics=False if c.caustics == "off" else None)
+                                cells=self.cells, caustics=c.caustics)
         c.image_size = tuple(self.world.size)
         c.water = water_of(self.scene, self.cells)
         c.reapply(self.world)
@@ -652,8 +650,19 @@ class Viewer:
     def fps(self) -> float:
         return 0.0 if not self._dt_ema else 1.0 / self._dt_ema
 
+    def hud_text(self) -> list[str]:
+        """The HUD's lines for the shown frame (what :meth:`_draw` writes over the image)."""
+        from app.hud import hud_lines
+
+        c = self.controls
+        return hud_lines(self.world.stats, fps=self.fps, path=self.path,
+                         size=tuple(self.world.size), device=self.world.device_name,
+                         quality=self.quality.describe(), paused=c.paused,
+                         rain=c.rain_rate if c.rain_on else 0.0, spp=c.spp, bounces=c.bounces,
+                         caustics=str(getattr(self.world, "caustics", "") or ""))
+
     def _draw(self, swap: bool = True) -> None:
-        from app.hud import guard_lines, help_lines, hud_lines
+        from app.hud import guard_lines, help_lines
 
         ctx, c = self.ctx, self.controls
         ctx.screen.use()
@@ -663,13 +672,7 @@ class Viewer:
         now = self.now()
         blocks = []
         if c.show_hud:
-            lines = hud_lines(self.world.stats, fps=self.fps, path=self.path,
-                              size=tuple(self.world.size), device=self.world.device_name,
-                              quality=self.quality.describe(), paused=c.paused,
-                              rain=c.rain_rate if c.rain_on else 0.0, spp=c.spp,
-                              bounces=c.bounces,
-                              caustics=str(getattr(self.world, "caustics", "") or ""))
-            blocks.append((lines, 8, 8))
+            blocks.append((self.hud_text(), 8, 8))
             warn = guard_lines(self.world.stats)
             if warn:
                 blocks.append((warn, -8, 8, (1.0, 0.6, 0.3, 1.0)))
@@ -758,8 +761,9 @@ def run(args) -> int:
     if replay is not None:
         h = replay.header
         window_size = tuple(h.get("window", window_size))
+        ca = h.get("caustics")   # files of before 2026-12 wrote false for "off"
         quality = q.Quality(int(h["cells"]), float(h["scale"]), int(h["bounces"]), "replayed",
-                            caustics=h.get("caustics"))
+                            caustics={False: "off", True: "traced"}.get(ca, ca))
         spp = int(h.get("spp", 1))
     else:
         quality = decide_quality(args, scene, rt, window_size, frame_seconds)

@@ -314,9 +314,11 @@ def test_keys_that_rebuild_keep_the_camera_and_fullscreen_toggles(viewer):
     v.on_button(Button.LEFT, False)
     v.step()
     camera = v.world.camera
-    assert v.world.caustics == "off"                     # the scene's
+    assert v.world.caustics == "off" and v.controls.caustics is None   # the scene's
     v.on_action(Action.TOGGLE_CAUSTICS)
-    assert v.world.caustics == "traced"
+    assert v.world.caustics == "traced" == v.controls.caustics
+    v.step()
+    assert "caustics traced" in "\n".join(v.hud_text())
     for a in (Action.GRID_DOWN, Action.BOUNCES_UP, Action.SPP_2):
         v.on_action(a)
     v.step()
@@ -324,6 +326,13 @@ def test_keys_that_rebuild_keep_the_camera_and_fullscreen_toggles(viewer):
     assert v.world.stats.water_cells == (21, 16)         # 32 / 1.5 along the longer side
     assert (v.world.bounces, v.world.spp) == (2, 2)
     assert v.world.camera == camera and v.world.caustics == "traced"   # kept by the rebuild
+    v.on_action(Action.TOGGLE_CAUSTICS)
+    v.on_action(Action.GRID_UP)
+    v.step()
+    assert v.world.caustics == "off" and "caustics off" in "\n".join(v.hud_text())
+    v.on_action(Action.TOGGLE_CAUSTICS)
+    v.step()
+    v.step()
     assert any(k.startswith("caustics.") for k in v.world.stats.stage_ms)
     v.on_action(Action.FULLSCREEN)
     for _ in range(30):

@@ -185,11 +185,11 @@ def test_auto_quality_picks_smaller_settings_on_a_slower_device():
 def test_expensive_caustics_are_turned_off_before_the_picture_gets_coarse():
     costs = dataclasses.replace(COSTS, caustics=900.0)   # PoCL's photons: 0.9 s a frame
     pick = choose(costs, caustics=True)
-    assert pick.caustics is False and pick.scale >= 0.5 and pick.predicted_ms <= 50
+    assert pick.caustics == "off" and pick.scale >= 0.5 and pick.predicted_ms <= 50
     cheap = choose(dataclasses.replace(COSTS, caustics=0.01), caustics=True, target_fps=1)
     assert cheap.caustics is None                        # kept: the scene's setting
     assert "caustics off" in pick.describe() and "caustics" not in cheap.describe()
-    assert q.preset("low", max_cells=200, max_bounces=5).caustics is False
+    assert q.preset("low", max_cells=200, max_bounces=5).caustics == "off"
 
 
 def test_ladder_rungs_never_cost_more_and_overrides_pin_their_part():
@@ -258,6 +258,8 @@ def test_hud_lines_show_fps_stages_grid_rays_device_and_guard_warnings():
         assert want in text
     assert guard_lines(Stats) == ["water: 7 cell updates limited (max Froude 0.91)"]
     assert hud_lines(None, fps=0, path="copy")[-1] == "display: copy"
+    before = hud_lines(None, fps=0, path="copy", size=(64, 48), caustics="off")
+    assert "caustics off" in before[1] and "grid" not in before[1]
     assert help_lines([("R", "rain")])[1] == "R\train"
 
 

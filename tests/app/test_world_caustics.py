@@ -127,10 +127,12 @@ def test_the_window_key_toggles_the_worlds_caustics_and_a_rebuilt_world_keeps_th
     c = Controls(OrbitCamera.from_look((0.5, 1.4, -0.3), (0.5, 0.0, 0.55), 50.0),
                  Water((0, 0, 0), (1, 1), 0.3, 1 / 16), window_size=(48, 32),
                  image_size=(48, 32))
+    assert c.caustics is None                 # no choice yet: the world keeps the scene's
     c.action(on, Action.TOGGLE_CAUSTICS)
-    assert on.caustics == "off" and c.caustics is False
+    assert on.caustics == "off" and c.caustics == "off"   # the mode string, as the world's
+    assert c.status_message(0.0) == "caustics off"
     c.action(on, Action.TOGGLE_CAUSTICS)
-    assert on.caustics == "traced"
+    assert on.caustics == "traced" and c.caustics == "traced"
     c.action(on, Action.TOGGLE_CAUSTICS)
     rebuilt = World(flat, rt, caustics="traced")
     c.reapply(rebuilt)
