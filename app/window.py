@@ -43,6 +43,7 @@ from app.controls import (
 from app.errors import InputError, LbwaterError
 
 SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+HUD_REFRESH = 0.25   #: seconds between renewals of the HUD's text
 EVENTS_VERSION = 1
 
 
@@ -464,6 +465,7 @@ class Viewer:
         self._t_last = None
         self._dt_ema = None
         self.fullscreen_saved = None
+        self._hud = (None, [], None)   # (when, lines, world) of the HUD's text
         self.screenshots: list[Path] = []
         self.last_snapshot = None
         self._keys = {getattr(glfw, f"KEY_{name}"): a for name, a in KEYMAP.items()}
@@ -672,7 +674,12 @@ class Viewer:
         now = self.now()
         blocks = []
         if c.show_hud:
-            blocks.append((self.hud_text(), 8, 8))
+            # the text is renewed HUD_REFRESH s apart (readable, and the HUD's vertices are
+            # then reused between renewals: on a CPU device GL shares its cores)
+            if (self._hud[0] is None or now - self._hud[0] >= HUD_REFRESH
+                    or self._hud[2] is not self.world):
+                self._hud = (now, self.hud_text(), self.world)
+            blocks.append((self._hud[1], 8, 8))
             warn = guard_lines(self.world.stats)
             if warn:
                 blocks.append((warn, -8, 8, (1.0, 0.6, 0.3, 1.0)))

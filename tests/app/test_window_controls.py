@@ -274,6 +274,26 @@ def test_glyph_atlas_has_ink_for_letters_and_none_for_space():
     assert math.isclose(at.text_width("ab"), at.advance["a"] + at.advance["b"])
 
 
+def test_glyph_quads_sit_at_the_pen_position_with_the_glyphs_atlas_box():
+    at = GlyphAtlas(14)
+    (H, W), (cw, ch) = at.image.shape, at.cell
+    runs = [("a c", 10.0, 20.0), ("", 0.0, 0.0), ("\x01", 5.0, 40.0)]
+    v = at.quads_many(runs, (0.1, 0.2, 0.3, 0.4)).reshape(-1, 6, 8)
+    assert v.shape == (3, 6, 8)                     # a, c and '?' for the unprintable
+    want = [("a", 10.0, 20.0), ("c", 10.0 + at.advance["a"] + at.advance[" "], 20.0),
+            ("?", 5.0, 40.0)]
+    for quad, (c, x, y) in zip(v, want, strict=True):
+        ax, ay = at.boxes[c]
+        assert quad[:, 0].min() == pytest.approx(x) and quad[:, 0].max() == pytest.approx(x + cw)
+        assert quad[:, 1].min() == pytest.approx(y) and quad[:, 1].max() == pytest.approx(y + ch)
+        assert quad[:, 2].min() == pytest.approx(ax / W) and quad[:, 3].max() == pytest.approx(
+            (ay + ch) / H)
+        # each corner's uv goes with its position: u grows with x, v with y
+        assert np.allclose((quad[:, 0] - x) / cw, (quad[:, 2] * W - ax) / cw)
+        assert np.allclose((quad[:, 1] - y) / ch, (quad[:, 3] * H - ay) / ch)
+        assert np.allclose(quad[:, 4:], (0.1, 0.2, 0.3, 0.4))
+
+
 def test_tab_columns_line_up_across_a_block():
     at = GlyphAtlas(14)
     offsets, w, h = at.layout(["a\tb", "wide text\tc", "title"])
