@@ -91,6 +91,7 @@ def add_arguments(p) -> None:
                    help="simulated seconds per frame (default: the measured frame interval)")
     p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
                    help="texture upload: through a pixel buffer (default) or directly")
+    p.add_argument("--report", help="write the run's settings and FPS to this JSON file")
 
 
 def check_args(args) -> None:
@@ -108,6 +109,9 @@ def check_args(args) -> None:
         raise InputError(f"--frame-time {args.frame_time} must lie in (0, 1] s")
     if args.screenshot is not None and Path(args.screenshot).suffix.lower() != ".png":
         raise InputError(f"--screenshot {args.screenshot!r} must end in .png")
+    report = getattr(args, "report", None)
+    if report is not None and Path(report).suffix.lower() != ".json":
+        raise InputError(f"--report {report!r} must end in .json")
 
 
 def require_display() -> None:
@@ -126,6 +130,16 @@ def make_world(scene, device, *, size, spp, bounces, cells, caustics: str | None
 
     return World(scene, device, width=size[0], height=size[1], spp=spp, bounces=bounces,
                  cells=None if scene.water is None else cells, caustics=caustics)
+
+
+def caustics_label(scene, world) -> str:
+    """What the HUD says of the world's caustics: "off", "traced (N photons)", or ""."""
+    from app.assemble import caustic_settings
+
+    mode = str(getattr(world, "caustics", "") or "")
+    if mode == "traced":
+        return f"traced ({caustic_settings(scene).photons} photons)"
+    return mode
 
 
 def display_path(rt, upload: str = "pbo") -> str:
@@ -147,38 +161,63 @@ def water_of(scene, cells: int | None) -> Water | None:
     return Water(tuple(w.origin), tuple(w.size), float(w.depth), float(w.size[0]) / w.cells[0])
 
 
-def decide_quality(args, scene, rt, window_size, frame_seconds):
-    """The quality for this run (``--quality``, overrides, or a short measurement)."""
+def caustic_scene(scene, photons: int | None):
+    """``scene`` tracing ``photons`` caustic photons per frame, its caustic map's resolution
+    scaled to keep the photons per texel (:func:`app.quality.caustic_map_resolution`); None
+    or the scene's own count: the scene unchanged."""
+    from app.assemble import caustic_settings
+    from app.frames import with_shading
+    from app.quality import caustic_map_resolution
+
+    cs = caustic_settings(scene)
+    if not photons or photons == cs.photons:
+        return scene
+    return with_shading(scene, {"caustic_photons": int(photons), "caustic_resolution":
+                                caustic_map_resolution(photons, cs.photons, cs.resolution)})
+
+
+def decide_quality(args, scene, rt, window_size, frame_seconds, present=None):
+    """The quality for this run (``--quality``, overrides, or a short measurement of a probe
+    World; ``present(world, image)`` shows its frames, as :func:`app.quality.measure` says)."""
     from app import quality as q
+    from app.assemble import caustic_settings
 
     water = scene.water
     max_cells = max(water.cells) if water is not None else 2
     max_bounces = args.bounces if args.bounces is not None else scene.render.bounces
+    cs = caustic_settings(scene)
+    photons = cs.photons if cs.mode == "traced" and water is not None else 0
+    asked = getattr(args, "caustics", None)       # --caustics pins the mode
     if args.quality != "auto":
-        base = q.preset(args.quality, max_cells=max_cells, max_bounces=max(max_bounces, 1))
+        base = q.preset(args.quality, max_cells=max_cells, max_bounces=max(max_bounces, 1),
+                        photons=photons)
         return dataclasses.replace(
             base, cells=args.cells or base.cells, scale=args.scale or base.scale,
-            bounces=base.bounces if args.bounces is None else args.bounces)
+            bounces=base.bounces if args.bounces is None else args.bounces,
+            caustics=None if asked else base.caustics)
     if water is None:
         return q.Quality(2, args.scale or 1.0, max_bounces, "auto (no water)")
-    if args.cells and args.scale and args.bounces is not None:
+    if args.cells and args.scale and args.bounces is not None and (asked or not photons):
         return q.Quality(args.cells, args.scale, args.bounces, "fixed")
     probe_cells = args.cells or min(max_cells, 64)
     probe_size = q.scaled_size(window_size, min(0.5, args.scale or 0.5))
     probe_bounces = min(2, max_bounces) if args.bounces is None else args.bounces
-    world = make_world(scene, rt, size=probe_size, spp=args.spp or 1, bounces=probe_bounces,
-                       cells=probe_cells)
-    stats, wall_ms = q.measure(world, frame_seconds)
-    traced = getattr(world, "caustics", "off") != "off"
-    world.close()
+    probe_photons = min(photons, q.PROBE_PHOTONS)
+    world = make_world(caustic_scene(scene, probe_photons), rt, size=probe_size,
+                       spp=args.spp or 1, bounces=probe_bounces, cells=probe_cells)
+    try:
+        stats, wall_ms = q.measure(world, frame_seconds, present=present)
+    finally:
+        world.close()
     nx, ny = stats[-1].water_cells
     steps = sum(s.lbm_steps for s in stats) / len(stats)
-    costs = q.costs_from_stats(stats, wall_ms, n_cells=nx * ny, steps=steps)
+    costs = q.costs_from_stats(stats, wall_ms, n_cells=nx * ny, steps=steps,
+                               photons=probe_photons)
     return q.choose(costs, target_fps=args.target_fps, window=window_size, max_cells=max_cells,
                     max_bounces=max(max_bounces, 1), aspect=q.aspect_of(water.size),
-                    spp=args.spp or 1, base_cells=probe_cells, caustics=traced,
-                    fixed_cells=args.cells, fixed_scale=args.scale,
-                    fixed_bounces=args.bounces)
+                    spp=args.spp or 1, base_cells=probe_cells, photons=photons,
+                    keep_caustics=asked == "traced", fixed_cells=args.cells,
+                    fixed_scale=args.scale, fixed_bounces=args.bounces)
 
 
 # ---- event files ---------------------------------------------------------------------------
@@ -419,7 +458,7 @@ class Viewer:
         from app.quality import scaled_size
 
         self.glfw = glfw
-        self.scene, self.rt, self.quality = scene, rt, quality
+        self.rt = rt
         self.frame_time = frame_time
         self.replay = replay
         self.recording = [] if record else None
@@ -443,6 +482,11 @@ class Viewer:
         self.fb_size = tuple(glfw.get_framebuffer_size(self.win))
         self._start_window = tuple(window_size)
         self.win_size = tuple(glfw.get_window_size(self.win))
+        self.path = display_path(rt, upload)
+        if callable(quality):   # decided here, its probe frames shown as the window shows
+            quality = quality(self)
+        self.quality = quality
+        self.scene = scene = caustic_scene(scene, quality.photons)
         logical = tuple(replay.header.get("window", self.win_size)) if replay else self.win_size
         c = scene.camera
         bounces = quality.bounces
@@ -452,7 +496,6 @@ class Viewer:
                                  water_of(scene, self.cells), spp=spp, bounces=bounces,
                                  cells=self.cells, window_size=logical, image_size=image,
                                  frame_time=frame_time or 1 / 60)
-        self.path = display_path(rt, upload)
         self.world = make_world(scene, rt, size=image, spp=spp, bounces=bounces,
                                 cells=self.cells, caustics=quality.caustics)
         self.controls.caustics = quality.caustics   # C toggles from here; rebuilds keep it
@@ -477,6 +520,24 @@ class Viewer:
         else:  # replay: only Esc from the keyboard
             glfw.set_key_callback(self.win, self._glfw_key_replay)
         glfw.set_framebuffer_size_callback(self.win, self._glfw_fb)
+
+    def present_probe(self, world, img) -> None:
+        """Show a probe World's frame as the loop shows frames (image, HUD, help; swap), so
+        that the auto quality's measurement includes the display's cost."""
+        from app.hud import help_lines, hud_lines
+
+        self.glfw.poll_events()
+        self.presenter.upload(img)
+        ctx = self.ctx
+        ctx.screen.use()
+        ctx.viewport = (0, 0, *self.fb_size)
+        ctx.clear(0.0, 0.0, 0.0, 1.0)
+        self.presenter.draw(self.fb_size)
+        lines = hud_lines(world.stats, fps=0.0, path=self.path, size=tuple(world.size),
+                          device=world.device_name, quality="quality auto: measuring ...",
+                          bounces=world.bounces, caustics=caustics_label(world.scene, world))
+        self.hud.draw([(lines, 8, 8), (help_lines(HELP), -8, -8)], self.fb_size)
+        self.glfw.swap_buffers(self.win)
 
     # -- time -------------------------------------------------------------------------------
     def now(self) -> float:
@@ -661,7 +722,7 @@ class Viewer:
                          size=tuple(self.world.size), device=self.world.device_name,
                          quality=self.quality.describe(), paused=c.paused,
                          rain=c.rain_rate if c.rain_on else 0.0, spp=c.spp, bounces=c.bounces,
-                         caustics=str(getattr(self.world, "caustics", "") or ""))
+                         caustics=caustics_label(self.scene, self.world))
 
     def _draw(self, swap: bool = True) -> None:
         from app.hud import guard_lines, help_lines
@@ -737,7 +798,8 @@ class Viewer:
     def event_log(self) -> EventLog:
         q = self.quality
         header = {"window": list(self._start_window), "cells": q.cells, "scale": q.scale,
-                  "bounces": q.bounces, "caustics": q.caustics, "spp": self.controls.spp}
+                  "bounces": q.bounces, "caustics": q.caustics, "photons": q.photons,
+                  "spp": self.controls.spp}
         return EventLog(header, list(self.recording or ()))
 
     def close(self) -> None:
@@ -770,17 +832,21 @@ def run(args) -> int:
         window_size = tuple(h.get("window", window_size))
         ca = h.get("caustics")   # files of before 2026-12 wrote false for "off"
         quality = q.Quality(int(h["cells"]), float(h["scale"]), int(h["bounces"]), "replayed",
-                            caustics={False: "off", True: "traced"}.get(ca, ca))
+                            caustics={False: "off", True: "traced"}.get(ca, ca),
+                            photons=h.get("photons"))
         spp = int(h.get("spp", 1))
     else:
-        quality = decide_quality(args, scene, rt, window_size, frame_seconds)
+        def quality(viewer):   # decided once the window is open: the probe shows in it
+            return decide_quality(args, scene, rt, window_size, frame_seconds,
+                                  present=viewer.present_probe)
+        if args.quality != "auto":
+            quality = decide_quality(args, scene, rt, window_size, frame_seconds)
         spp = args.spp or (scene.render.spp if scene.render.spp in (1, 2, 4) else 1)
-    print(f"lbwater window: {rt.name}; {quality.describe()}; display "
-          f"{display_path(rt, args.upload)}",
-          flush=True)
     viewer = Viewer(scene, rt, window_size=window_size, quality=quality, spp=spp,
                     frame_time=args.frame_time, vsync=not args.no_vsync, upload=args.upload,
                     replay=replay, record=bool(args.record_events))
+    print(f"lbwater window: {rt.name}; {viewer.quality.describe()}; display {viewer.path}",
+          flush=True)
     try:
         t0 = time.perf_counter()
         shown = viewer.run(args.frames)
@@ -789,8 +855,29 @@ def run(args) -> int:
             viewer.save_screenshot(args.screenshot, hud=args.screenshot_hud)
         if args.record_events:
             viewer.event_log().write(args.record_events)
-        print(f"lbwater window: {shown} frames in {elapsed:.2f} s "
-              f"({shown / max(elapsed, 1e-9):.1f} FPS)", flush=True)
+        fps = shown / max(elapsed, 1e-9)
+        print(f"lbwater window: {shown} frames in {elapsed:.2f} s ({fps:.1f} FPS)", flush=True)
+        if getattr(args, "report", None):
+            write_report(args.report, viewer, args, shown, elapsed)
     finally:
         viewer.close()
     return 0
+
+
+def write_report(path, viewer, args, shown: int, elapsed: float) -> None:
+    """--report: the run's settings and frame rate as JSON (bench/window_fps.py reads it)."""
+    from app.io import write_json
+
+    q = viewer.quality
+    write_json(path, {
+        "date": time.strftime("%Y-%m-%d %H:%M"), "device": viewer.world.device_name,
+        "gl_renderer": viewer.ctx.info["GL_RENDERER"], "display_path": viewer.path,
+        "scene": str(args.scene), "window": list(viewer._start_window),
+        "image": list(viewer.world.size), "quality": q.describe(), "source": q.source,
+        "cells": q.cells, "scale": q.scale, "bounces": q.bounces,
+        "caustics": viewer.world.caustics, "photons": q.photons, "target_fps": args.target_fps,
+        "predicted_ms": None if q.predicted_ms is None else round(q.predicted_ms, 3),
+        "frames": shown, "seconds": round(elapsed, 3),
+        "frame_ms": round(1e3 * elapsed / max(1, shown), 3),
+        "fps": round(shown / max(elapsed, 1e-9), 2),
+        "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None})

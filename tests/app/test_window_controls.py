@@ -175,29 +175,73 @@ def test_auto_quality_picks_smaller_settings_on_a_slower_device():
     assert fast.predicted_ms <= 50.0
     assert (slow.cells, slow.scale, slow.bounces) != (fast.cells, fast.scale, fast.bounces)
     assert slow.cells <= fast.cells and slow.scale <= fast.scale and slow.bounces <= fast.bounces
-    # the choice is monotone in the device's speed
+    # the choice is monotone in the device's speed, from the best rung to the least
     picks = [choose(COSTS.scaled(f)) for f in (0.01, 0.1, 1, 10, 100)]
     rank = q.ladder(200, 5)
-    idx = [rank.index((p.cells, p.scale, p.bounces, False)) for p in picks]
+    idx = [rank.index((p.cells, p.scale, p.bounces, 0)) for p in picks]
     assert idx == sorted(idx) and idx[0] == 0 and idx[-1] == len(rank) - 1
+    assert picks[-1].predicted_ms > 50.0    # nothing fits: the last rung, and it says so
 
 
-def test_expensive_caustics_are_turned_off_before_the_picture_gets_coarse():
-    costs = dataclasses.replace(COSTS, caustics=900.0)   # PoCL's photons: 0.9 s a frame
-    pick = choose(costs, caustics=True)
+def test_steps_that_save_little_wait_until_they_matter():
+    # the water grid costs little beside the rays (as on a CPU): coarser grids are not rungs
+    rays = dataclasses.replace(COSTS, per_cell_step=1e-9, per_cell=1e-9)
+    least = choose(rays.scaled(1000.0))
+    assert least.cells == 200 and least.scale == 0.25 and least.bounces == 1
+    # caustics that cost nothing stay on while the scale drops
+    free = choose(dataclasses.replace(COSTS, caustics=0.01, caustic_photons=P), photons=P)
+    assert free.caustics is None and free.photons == P and free.scale == 0.5
+    # caustics that cost much: bounces go later, once their saving matters (not never)
+    dear = dataclasses.replace(COSTS, caustics=900.0, caustic_photons=P)
+    rungs = q.ladder(200, 5, P, worth=lambda a, b: q.predict_ms(
+        dear, cells=b.cells, aspect=0.75, scale=b.scale, bounces=b.bounces, window=(640, 360),
+        photons=b.photons) <= 0.95 * q.predict_ms(
+        dear, cells=a.cells, aspect=0.75, scale=a.scale, bounces=a.bounces, window=(640, 360),
+        photons=a.photons))
+    assert all(r.bounces == 5 for r in rungs if r.photons == P)   # photons go first here
+    assert [r.bounces for r in rungs if r.photons == 0][0] == 2      # bounces followed
+
+
+P = 262144   # the pool scene's caustic photons
+
+
+def test_expensive_caustics_are_turned_down_then_off_before_the_picture_gets_coarse():
+    costs = dataclasses.replace(COSTS, caustics=900.0, caustic_photons=65536)  # 3.6 s at P
+    pick = choose(costs, photons=P)
     assert pick.caustics == "off" and pick.scale >= 0.5 and pick.predicted_ms <= 50
-    cheap = choose(dataclasses.replace(COSTS, caustics=0.01), caustics=True, target_fps=1)
-    assert cheap.caustics is None                        # kept: the scene's setting
-    assert "caustics off" in pick.describe() and "caustics" not in cheap.describe()
-    assert q.preset("low", max_cells=200, max_bounces=5).caustics == "off"
+    assert pick.photons == P // 16          # what C turns on: the fewest photons
+    assert "caustics off" in pick.describe()
+    mid = choose(dataclasses.replace(costs, caustics=30.0), photons=P, target_fps=10)
+    assert mid.caustics is None and mid.photons in (P // 4, P // 16) and mid.predicted_ms <= 100
+    assert f"caustics traced ({mid.photons} photons)" in mid.describe()
+    cheap = choose(dataclasses.replace(COSTS, caustics=0.01, caustic_photons=P), photons=P,
+                   target_fps=1)
+    assert cheap.caustics is None and cheap.photons == P    # kept: the scene's setting
+    kept = choose(costs, photons=P, keep_caustics=True)      # --caustics traced
+    assert kept.caustics is None and kept.photons == P // 16 and "caustics" in kept.source
+    assert "caustics" not in choose(COSTS).describe()        # a scene without them
+    # the cost model: linear in the photons; the map's side with their square root
+    assert costs.caustic_ms(P) == pytest.approx(3600.0) and costs.caustic_ms(0) == 0.0
+    assert q.caustic_levels(P) == [P, P // 4, P // 16] and q.caustic_levels(2048) == [2048, 1024]
+    assert [q.caustic_map_resolution(p, P, 256) for p in q.caustic_levels(P)] == [256, 128, 64]
+
+
+def test_presets_turn_caustics_down_or_off():
+    low, med, high = (q.preset(n, max_cells=200, max_bounces=5, photons=P)
+                      for n in ("low", "medium", "high"))
+    assert (low.caustics, low.photons) == ("off", P // 16)
+    assert (med.caustics, med.photons) == (None, P // 4)
+    assert (high.caustics, high.photons) == (None, P)
+    assert q.preset("low", max_cells=200, max_bounces=5).photons is None   # no caustics
 
 
 def test_ladder_rungs_never_cost_more_and_overrides_pin_their_part():
-    rungs = q.ladder(200, 5, caustics=True)
-    costs = dataclasses.replace(COSTS, caustics=5.0)
+    rungs = q.ladder(200, 5, photons=P)
+    costs = dataclasses.replace(COSTS, caustics=5.0, caustic_photons=P)
     ms = [q.predict_ms(costs, cells=c, aspect=0.75, scale=s, bounces=b, window=(640, 360),
-                       caustics=k) for c, s, b, k in rungs]
-    assert rungs[0] == (200, 1.0, 5, True) and rungs[-1] == (32, 0.25, 1, False)
+                       photons=k) for c, s, b, k in rungs]
+    assert rungs[0] == (200, 1.0, 5, P) and rungs[-1] == (32, 0.25, 1, 0)
+    assert [k for k in dict.fromkeys(r.photons for r in rungs)] == [P, P // 4, P // 16, 0]
     assert all(b <= a for a, b in zip(ms, ms[1:], strict=False))
     pinned = choose(COSTS.scaled(100.0), fixed_scale=1.0, fixed_bounces=3)
     assert pinned.scale == 1.0 and pinned.bounces == 3 and "fixed" in pinned.source
@@ -211,10 +255,11 @@ def test_costs_from_probe_stats_recover_the_units():
         n_rays = 1000
         rays_per_depth = (800, 200)
 
-    c = q.costs_from_stats([S, S], wall_ms=33.0, n_cells=100, steps=2)
+    c = q.costs_from_stats([S, S], wall_ms=33.0, n_cells=100, steps=2, photons=4096)
     assert c.per_cell_step == pytest.approx(0.02) and c.per_cell == pytest.approx(0.02)
     assert c.per_ray == pytest.approx(0.02) and c.fixed == pytest.approx(4.0)
-    assert c.caustics == pytest.approx(3.0)
+    assert c.caustics == pytest.approx(3.0) and c.caustic_photons == 4096
+    assert c.caustic_ms(8192) == pytest.approx(6.0)
     assert c.ray_ratio == pytest.approx((1.0, 0.25))
 
 
