@@ -136,6 +136,38 @@ def test_window_renders_frames_and_its_screenshot_is_the_offscreen_render(displa
     assert (diff <= 1).mean() >= 0.99, f"max diff {diff.max()}"
 
 
+def test_auto_quality_probes_in_the_window_and_its_choice_meets_the_target(display, scene,
+                                                                          tmp_path, monkeypatch):
+    """--quality auto with traced caustics: the probe's frames are shown in the window (its
+    display cost is measured), the choice and its caustics are reported, and the frames at the
+    chosen settings meet the target frame time that the model predicted they would."""
+    import json
+
+    from app.cli import main
+    from app.window import Viewer
+
+    path = tmp_path / "caustic.toml"
+    path.write_text(SCENE + '[shading]\ncaustics = "traced"\ncaustic_photons = 4096\n'
+                    'caustic_resolution = 32\n')
+    shown = []
+    real = Viewer.present_probe
+    monkeypatch.setattr(Viewer, "present_probe",
+                        lambda self, world, img: (shown.append(img.shape), real(self, world, img)))
+    report = tmp_path / "run.json"
+    status = main(["window", str(path), "--size", "96x72", "--quality", "auto",
+                   "--target-fps", "5", "--frames", "12", "--no-vsync", "--frame-time",
+                   str(FRAME_TIME), "--report", str(report)])
+    assert status == 0
+    assert shown == [(36, 48, 4)] * 6      # warm-up and timed probe frames, at scale 0.5
+    r = json.loads(report.read_text())
+    assert r["source"] == "auto" and r["frames"] == 12 and r["window"] == [96, 72]
+    assert r["fps"] == pytest.approx(r["frames"] / r["seconds"], rel=0.01)
+    assert r["caustics"] in ("traced", "off") and r["photons"] in (4096, 1024)
+    assert ("caustics" in r["quality"]) and r["image"] == [round(96 * r["scale"]),
+                                                           round(72 * r["scale"])]
+    assert r["predicted_ms"] <= 200.0 and r["frame_ms"] <= 200.0   # 5 FPS: 200 ms a frame
+
+
 def test_drag_on_the_water_changes_heights_only_near_the_picked_points(viewer):
     v = viewer
     v.step()
