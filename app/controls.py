@@ -378,7 +378,13 @@ class Controls:
         elif hit is None:
             self.say(now, "point at the water to drop a boat")
         else:
-            drop(*hit)
+            from app.errors import InputError
+
+            try:
+                drop(*hit)
+            except InputError as exc:   # a scene without boats, say: the reason, no crash
+                self.say(now, str(exc))
+                return
             self.say(now, "boat dropped")
 
     def _ripple_radius(self) -> float:

@@ -153,6 +153,33 @@ def test_actions_rain_pause_step_and_rebuild_requests():
     assert c.apply(world).quit
 
 
+def test_b_drops_a_boat_over_the_water_under_the_cursor_or_says_why_not():
+    from app.errors import InputError
+
+    class Boats(FakeWorld):
+        boats = True
+
+        def drop_boat(self, x, y):
+            if not self.boats:
+                raise InputError("drop_boat: the scene has no [[boats]]")
+            self.calls.append(("drop_boat", (x, y)))
+
+    world = Boats()
+    c = make_controls(world)
+    c.cursor(world, 64, 60)
+    c.action(world, Action.DROP_BOAT)
+    (name, (x, y)), = world.calls
+    hit = world.pick(32, 30).pool_xy
+    assert name == "drop_boat" and (x, y) == pytest.approx(hit) and c.message == "boat dropped"
+    c.cursor(world, 1, 1)                    # the sky: nothing to drop onto
+    c.action(world, Action.DROP_BOAT)
+    assert len(world.calls) == 1 and "point at the water" in c.message
+    world.boats = False                      # a World whose scene has no boats: its reason
+    c.cursor(world, 64, 60)
+    c.action(world, Action.DROP_BOAT)
+    assert len(world.calls) == 1 and c.message == "drop_boat: the scene has no [[boats]]"
+
+
 def test_action_names_round_trip_and_unknown_names_list_the_valid_ones():
     assert Action.from_str("toggle_rain") is Action.TOGGLE_RAIN
     with pytest.raises(ValueError, match="valid: quit, toggle_rain"):
