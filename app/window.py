@@ -1,22 +1,27 @@
 """Open an interactive window on a scene: rain, mouse ripples, an orbit camera and a HUD.
 
 Display path: each frame's RGBA8 image is read back without blocking (two frames in flight,
-World.enqueue_frame / read_frame) and uploaded to a GL texture through a pixel buffer, then drawn
-as one quad with the HUD over it. Where the OpenCL device offers cl_khr_gl_sharing the window says
-so, but rendering straight into the GL texture is not implemented (PoCL and pip's pyopencl lack
-the extension, so it could not be tested here): the copy path is always used, and the HUD names it.
+World.enqueue_frame / read_frame) and uploaded to a GL texture through a pixel buffer (--upload
+direct: without one), then drawn as one quad with the HUD over it. Where the OpenCL device
+offers cl_khr_gl_sharing the window says so, but rendering straight into the GL texture is not
+implemented (PoCL and pip's pyopencl lack the extension, so it could not be tested here): the
+copy path is always used, and the start line and the HUD name it.
 
 Mouse: drag on the water makes ripples where the mouse ray meets the water; Shift+drag pushes the
 water along the drag; drag elsewhere orbits; right drag pans; the wheel zooms. Keys: R rain,
-[ ] rain rate, Space pause, N one step, B boat, + - bounces, 1 2 4 samples, G / Shift+G grid,
-S screenshot, C caustics, H help, F2 HUD, F fullscreen, Esc quit.
+[ ] rain rate, Space pause, N one step, B drop a boat above the cursor (the scene's first
+[[boats]]), + - bounces, 1 2 4 samples, G / Shift+G grid, S screenshot, C caustics traced/off,
+H help, F2 HUD, F fullscreen, Esc quit.
 
-Quality: --quality auto (default) measures a few frames at start and picks the water grid,
-render scale, bounce depth and traced caustics (on/off) that hold --target-fps; --quality
-low|medium|high fixes them;
---cells, --scale and --bounces pin their own part. Scripting: --frames N, --screenshot PATH,
---record-events FILE and --events FILE (a deterministic replay: events at their frame indices,
-recorded frame times). Without a display it says so and exits with status 2: use `lbwater capture`.
+Quality: --quality auto (default) shows a small probe World for a few frames at start, measures
+it, and picks the water grid, render scale, bounce depth and caustic photons (the scene's, a
+quarter, a sixteenth, or off) predicted to hold --target-fps; the start line and the HUD say
+what it chose, and where it turned caustics off, C turns on the fewest photons. --quality
+low|medium|high fixes them; --cells, --scale, --bounces and --caustics pin their own part. The
+boats' physics always runs. Scripting: --frames N, --screenshot PATH, --record-events FILE and
+--events FILE (a deterministic replay: events at their frame indices, recorded frame times),
+--report FILE (the settings and the FPS as JSON). Without a display it says so and exits with
+status 2: use `lbwater capture`.
 
     lbwater window scenes/pool.toml --size 1280x720
 """
@@ -70,12 +75,12 @@ def add_arguments(p) -> None:
     p.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
     p.add_argument("--size", help="window size WxH in pixels (default: the scene's [render])")
     p.add_argument("--quality", choices=QUALITIES, default="auto",
-                   help="auto: measure and pick grid, scale and bounces for --target-fps; "
-                        "low/medium/high: fixed presets")
+                   help="auto: measure and pick grid, scale, bounces and caustic photons "
+                        "for --target-fps; low/medium/high: fixed presets")
     p.add_argument("--target-fps", type=float, default=60.0, help="frame rate auto aims for")
     p.add_argument("--caustics", choices=("off", "traced", "projected"),
                    help="caustics under the water (key C in the window); default from "
-                        "[shading] caustics")
+                        "[shading] caustics; given, auto quality keeps the mode")
     p.add_argument("--cells", type=int, help="water cells along the pool's longer side")
     p.add_argument("--scale", type=float, help="image pixels per window pixel, (0, 1]")
     p.add_argument("--bounces", type=int, help="reflection/refraction depth")
