@@ -489,7 +489,9 @@ class Viewer:
         self.win_size = tuple(glfw.get_window_size(self.win))
         self.path = display_path(rt, upload)
         if callable(quality):   # decided here, its probe frames shown as the window shows
+            glfw.swap_interval(0)   # them, but not waiting for the display's refresh
             quality = quality(self)
+            glfw.swap_interval(1 if vsync else 0)
         self.quality = quality
         self.scene = scene = caustic_scene(scene, quality.photons)
         logical = tuple(replay.header.get("window", self.win_size)) if replay else self.win_size

@@ -149,16 +149,22 @@ def test_auto_quality_probes_in_the_window_and_its_choice_meets_the_target(displ
     path = tmp_path / "caustic.toml"
     path.write_text(SCENE + '[shading]\ncaustics = "traced"\ncaustic_photons = 4096\n'
                     'caustic_resolution = 32\n')
-    shown = []
+    import glfw
+
+    shown, interval = [], [None]
     real = Viewer.present_probe
-    monkeypatch.setattr(Viewer, "present_probe",
-                        lambda self, world, img: (shown.append(img.shape), real(self, world, img)))
+    monkeypatch.setattr(Viewer, "present_probe", lambda self, world, img: (
+        shown.append((img.shape, interval[0])), real(self, world, img)))
+    # vsync is asked for (no --no-vsync), but a probe that waited for the display's refresh
+    # would time the refresh: the probe's frames are swapped at interval 0
+    monkeypatch.setattr(glfw, "swap_interval", lambda n: interval.__setitem__(0, n))
     report = tmp_path / "run.json"
     status = main(["window", str(path), "--size", "96x72", "--quality", "auto",
-                   "--target-fps", "5", "--frames", "12", "--no-vsync", "--frame-time",
-                   str(FRAME_TIME), "--report", str(report)])
+                   "--target-fps", "5", "--frames", "12", "--frame-time", str(FRAME_TIME),
+                   "--report", str(report)])
     assert status == 0
-    assert shown == [(36, 48, 4)] * 6      # warm-up and timed probe frames, at scale 0.5
+    assert shown == [((36, 48, 4), 0)] * 6  # warm-up and timed probe frames, at scale 0.5
+    assert interval[0] == 1                 # then vsync, as asked
     r = json.loads(report.read_text())
     assert r["source"] == "auto" and r["frames"] == 12 and r["window"] == [96, 72]
     assert r["fps"] == pytest.approx(r["frames"] / r["seconds"], rel=0.01)
