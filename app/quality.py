@@ -6,10 +6,10 @@ the display's own cost is in the wall time) and :func:`costs_from_stats` reduces
 :class:`Costs` (ms per cell-step of the water, per cell of the surface and BVH, per ray, per
 caustic photon, and a fixed part); :func:`choose` is a pure function of those costs: it walks a
 ladder of settings from the best down, each rung cheaper than the one before, and takes the first
-whose predicted frame time fits ``1000 / target_fps`` ms. Where no rung fits, it takes the first
-rung within :data:`NO_FIT_SLACK` of the cheapest's time (the rungs below it would coarsen the
-picture for a few percent). A slower device (larger costs) therefore lands on the same or a
-lower rung, never a higher one. Fixed presets (``low``, ``medium``, ``high``) skip the
+whose predicted frame time fits ``1000 / target_fps`` ms, else the last. A step down is a rung
+only where it saves :data:`MIN_SAVING` of the frame time (else it waits until it does), a ratio
+that a uniformly slower device shares: such a device (larger costs) lands on the same or a lower
+rung, never a higher one. Fixed presets (``low``, ``medium``, ``high``) skip the
 measurement, and explicit ``--cells``/``--scale``/``--bounces``/``--caustics`` pin their own part
 of any choice.
 
@@ -94,8 +94,8 @@ class Costs:
                                    caustics=self.caustics * factor)
 
     def caustic_ms(self, photons: int) -> float:
-        """Traced caustics at ``photons`` per frame (0: off), with the map's texels scaled as
-        :func:`caustic_levels` scales them (both linear in the photons)."""
+        """Traced caustics at ``photons`` per frame (0: off), the map's side scaled as
+        :func:`caustic_map_resolution` scales it (photons and texels: both linear)."""
         if not photons:
             return 0.0
         return self.caustics * photons / max(1, self.caustic_photons or photons)
