@@ -8,6 +8,11 @@ glFinish), and the upload + draw alone. The goal (issue 11): the window's loop <
 frame. Every size is checked in the same run: the drawn framebuffer must equal the frame's image
 exactly, else the run fails. Each row names the GL renderer: where EGL lists several devices
 (a GPU and Mesa's llvmpipe), ``GLCONTEXT_DEVICE_INDEX=N`` picks another one.
+
+``--quality auto|low|medium|high``: each size is a window's; the quality is chosen as `lbwater
+window` chooses it (auto: its probe drawn with the HUD into the window-size framebuffer) and the
+image, at the chosen scale, is drawn stretched to the window with the HUD over it, as the window
+does. The row adds the choice, its predicted frame time and the loop's FPS.
 """
 
 from __future__ import annotations
@@ -33,6 +38,11 @@ def add_arguments(p) -> None:
                    help="simulated seconds of water per frame")
     p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
                    help="texture upload path")
+    p.add_argument("--quality", choices=("auto", "low", "medium", "high"),
+                   help="sizes are windows' and the window's quality choice sets the image "
+                        "(default: the image is the size, at the scene's settings)")
+    p.add_argument("--target-fps", type=float, default=60.0,
+                   help="frame rate --quality auto aims for")
 
 
 def _egl_context():
@@ -52,9 +62,11 @@ def _median_ms(xs) -> float:
 
 
 def run(args) -> int:
+    from app.hud import Hud
     from app.io import write_csv, write_json
+    from app.quality import scaled_size
     from app.scene import load_scene
-    from app.window import Presenter, display_path, make_world, parse_size
+    from app.window import Presenter, caustic_scene, display_path, make_world, parse_size
     from kernels import get_runtime
 
     sizes = [parse_size(s, "--sizes") for s in args.sizes]
@@ -62,11 +74,20 @@ def run(args) -> int:
     rt = get_runtime(args.device)
     ctx = _egl_context()
     presenter = Presenter(ctx, args.upload)
+    hud = Hud(ctx) if args.quality else None
     rows = []
     ft = args.frame_time
-    for w, h in sizes:
-        world = make_world(scene, rt, size=(w, h), spp=scene.render.spp,
-                           bounces=scene.render.bounces, cells=args.cells)
+    for size in sizes:
+        quality, wscene, (w, h) = None, scene, size   # (w, h): the image's size
+        spp, bounces, cells = scene.render.spp, scene.render.bounces, args.cells
+        if args.quality:   # size is the window's; a framebuffer of it stands in for it
+            window = ctx.simple_framebuffer(size, components=4)
+            quality = _quality(args, scene, rt, size, ctx, window, presenter, hud)
+            wscene = caustic_scene(scene, quality.photons)
+            w, h = scaled_size(size, quality.scale)
+            spp, bounces, cells = 1, quality.bounces, quality.cells
+        world = make_world(wscene, rt, size=(w, h), spp=spp, bounces=bounces, cells=cells,
+                           caustics=quality.caustics if quality else None)
         fbo = ctx.simple_framebuffer((w, h), components=4)
         fbo.use()
         for _ in range(args.warmup):
@@ -85,7 +106,12 @@ def run(args) -> int:
             _, img = world.read_frame()
             t1 = time.perf_counter()
             presenter.upload(img)
-            presenter.draw((w, h))
+            if quality is None:
+                presenter.draw((w, h))
+            else:   # stretched to the window, the HUD over it (text renewed as it is there)
+                window.use()
+                presenter.draw(window.size)
+                hud.draw([(_hud_text(world, quality, k // 15), 8, 8)], window.size)
             ctx.finish()
             t2 = time.perf_counter()
             if k >= args.warmup:
@@ -99,16 +125,28 @@ def run(args) -> int:
             bad = np.mean(np.any(shown != img, axis=2))
             raise RuntimeError(f"bench window: {w}x{h}: the drawn frame differs from the image "
                                f"on {bad:.1%} of pixels")
-        bare_ms, loop_ms = _median_ms(bare), _median_ms(loop)
+        if quality is not None:
+            window.release()
+        # the row's numbers are the stored (rounded) ones, and the ratio is of those
+        bare_ms, loop_ms = round(_median_ms(bare), 3), round(_median_ms(loop), 3)
         cells = getattr(world.stats, "water_cells", None)
         row = {"device": world.device_name, "gl_renderer": ctx.info["GL_RENDERER"],
                "date": time.strftime("%Y-%m-%d"), "width": w, "height": h,
                "cells": f"{cells[0]}x{cells[1]}" if cells else "",
                "upload": args.upload, "display_path": display_path(rt, args.upload),
-               "bare_frame_ms": round(bare_ms, 3), "window_frame_ms": round(loop_ms, 3),
+               "bare_frame_ms": bare_ms, "window_frame_ms": loop_ms,
                "ratio": round(loop_ms / bare_ms, 3),
                "upload_draw_ms": round(_median_ms(upload), 3),
                "window_fps": round(1e3 / loop_ms, 1)}
+        if quality is not None:
+            row.update(window=f"{size[0]}x{size[1]}",
+                       quality=quality.describe(), source=quality.source,
+                       scale=quality.scale, bounces=quality.bounces,
+                       caustics=world.caustics, photons=quality.photons,
+                       target_fps=args.target_fps,
+                       predicted_ms=None if quality.predicted_ms is None
+                       else round(quality.predicted_ms, 3))
+            print(f"window {row['window']}: {quality.describe()}", flush=True)
         rows.append(row)
         print(f"{w}x{h}: bare frame {bare_ms:.2f} ms, window loop {loop_ms:.2f} ms "
               f"({row['ratio']:.2f}x), upload+draw {row['upload_draw_ms']:.2f} ms "
@@ -119,3 +157,35 @@ def run(args) -> int:
     write_json(out / "bench_window.json", rows)
     write_csv(out / "bench_window.csv", rows)
     return 0
+
+
+def _quality(args, scene, rt, window_size, ctx, window, presenter, hud):
+    """The window's quality choice (app.window.decide_quality), its probe frames drawn into
+    ``window`` (a framebuffer of the window's size) with the HUD, as the window draws them."""
+    import argparse
+
+    from app.window import decide_quality
+
+    def present(world, img):
+        presenter.upload(img)
+        window.use()
+        window.clear(0.0, 0.0, 0.0, 1.0)
+        presenter.draw(window.size)
+        hud.draw([(_hud_text(world, None, 0), 8, 8)], window.size)
+        ctx.finish()
+
+    wargs = argparse.Namespace(quality=args.quality, target_fps=args.target_fps,
+                               cells=args.cells, scale=None, bounces=None, spp=None,
+                               caustics=None)
+    return decide_quality(wargs, scene, rt, window_size, args.frame_time, present=present)
+
+
+def _hud_text(world, quality, tick: int) -> list[str]:
+    """The window's HUD lines for ``world`` (its text changes with ``tick``, as the FPS does)."""
+    from app.hud import hud_lines
+    from app.window import caustics_label
+
+    return hud_lines(world.stats, fps=float(tick), path="copy", size=tuple(world.size),
+                     device=world.device_name,
+                     quality=quality.describe() if quality else "quality auto: measuring ...",
+                     bounces=world.bounces, caustics=caustics_label(world.scene, world))

@@ -225,7 +225,9 @@ class Controls:
         self.rain_on = False
         self.rain_rate = RAIN_RATE_DEFAULT
         self._rain_dirty = False
-        self.caustics: str | None = None  # None: the world's own (the scene's) setting
+        #: the user's caustics mode ("off" | "traced", as ``World.caustics``); None: the
+        #: world's own (the scene's) setting. A rebuilt world gets it in :meth:`reapply`.
+        self.caustics: str | None = None
         self.help_until = HELP_SECONDS   # seconds of wall time since the start
         self.show_hud = True
         self.message = ""
@@ -376,7 +378,13 @@ class Controls:
         elif hit is None:
             self.say(now, "point at the water to drop a boat")
         else:
-            drop(*hit)
+            from app.errors import InputError
+
+            try:
+                drop(*hit)
+            except InputError as exc:   # a scene without boats, say: the reason, no crash
+                self.say(now, str(exc))
+                return
             self.say(now, "boat dropped")
 
     def _ripple_radius(self) -> float:

@@ -65,8 +65,27 @@ class GlyphAtlas:
         self.cell = (cw, ch)
         self.line_height = ch + 2
 
+    def _codes(self, text: str) -> np.ndarray:
+        """Character codes of ``text``, with '?' for what the atlas lacks."""
+        c = np.frombuffer(text.encode("ascii", "replace"), np.uint8)
+        return np.where((c >= FIRST) & (c <= LAST), c, ord("?"))
+
+    @property
+    def _tables(self):
+        """Per code: advance (px) and atlas box (u0, v0, u1, v1), as arrays (made once)."""
+        if not hasattr(self, "_tab"):
+            H, W = self.image.shape
+            cw, ch = self.cell
+            adv = np.zeros(LAST + 1)
+            uv = np.zeros((LAST + 1, 4), np.float32)
+            for c, (ax, ay) in self.boxes.items():
+                adv[ord(c)] = self.advance[c]
+                uv[ord(c)] = (ax / W, ay / H, (ax + cw) / W, (ay + ch) / H)
+            self._tab = adv, uv
+        return self._tab
+
     def text_width(self, text: str) -> float:
-        return sum(self.advance.get(c, self.advance["?"]) for c in text)
+        return float(self._tables[0][self._codes(text)].sum())
 
     def layout(self, lines) -> tuple[list[float], float, float]:
         """Column offsets (px) of tab-separated lines, and the block's width and height."""
@@ -79,20 +98,40 @@ class GlyphAtlas:
         w = max(offsets[len(c) - 1] + at.text_width(c[-1]) for c in cols) + 12
         return offsets, w, len(lines) * at.line_height + 8
 
+    #: the six corners of a glyph's two triangles: which of (x0, x1) and (y0, y1) each takes
+    _CX = np.array([0, 1, 1, 0, 1, 0])
+    _CY = np.array([0, 0, 1, 0, 1, 1])
+
     def quads(self, text: str, x: float, y: float, color) -> np.ndarray:
         """Vertices (6 per glyph) of ``text`` with its top-left at (x, y) px: pos, uv, color."""
-        H, W = self.image.shape
+        return self.quads_many([(text, x, y)], color)
+
+    def quads_many(self, runs, color) -> np.ndarray:
+        """:meth:`quads` of several (text, x, y) runs at once (one NumPy pass)."""
+        adv, uv = self._tables
+        runs = [r for r in runs if r[0]]
+        if not runs:
+            return np.zeros((0, 8), np.float32)
+        codes = [self._codes(t) for t, _, _ in runs]
+        lens = np.array([len(c) for c in codes])
+        codes = np.concatenate(codes)
+        run = np.repeat(np.arange(len(runs)), lens)
+        ends = np.cumsum(adv[codes])                  # pen position after each glyph
+        before = np.concatenate(([0.0], ends[:-1]))   # ... before it
+        start = np.concatenate(([0], np.cumsum(lens)[:-1]))
+        x0 = np.array([r[1] for r in runs])[run] + before - before[start][run]
+        y0 = np.array([r[2] for r in runs], np.float64)[run]
+        ink = codes != ord(" ")
+        codes, x0, y0 = codes[ink], x0[ink], y0[ink]
         cw, ch = self.cell
-        out = []
-        for c in text:
-            if c not in self.boxes:
-                c = "?"
-            if c != " ":
-                ax, ay = self.boxes[c]
-                u0, v0, u1, v1 = ax / W, ay / H, (ax + cw) / W, (ay + ch) / H
-                out += _rect(x, y, x + cw, y + ch, u0, v0, u1, v1, color)
-            x += self.advance[c]
-        return np.asarray(out, np.float32).reshape(-1, 8)
+        xs = np.stack([x0, x0 + cw], axis=1)[:, self._CX]          # (n, 6)
+        ys = np.stack([y0, y0 + ch], axis=1)[:, self._CY]
+        box = uv[codes]
+        out = np.empty((len(codes), 6, 8), np.float32)
+        out[..., 0], out[..., 1] = xs, ys
+        out[..., 2], out[..., 3] = box[:, [0, 2]][:, self._CX], box[:, [1, 3]][:, self._CY]
+        out[..., 4:] = np.asarray(color, np.float32)
+        return out.reshape(-1, 8)
 
 
 def _rect(x0, y0, x1, y1, u0, v0, u1, v1, color) -> list:
@@ -116,6 +155,7 @@ class Hud:
         self.capacity = 0
         self.vbo = None
         self.vao = None
+        self._last_key, self._last_n = None, 0
 
     def _ensure(self, n_vertices: int) -> None:
         if n_vertices <= self.capacity:
@@ -137,14 +177,19 @@ class Hud:
         offsets, w, h = at.layout(lines)
         parts = [np.asarray(_rect(x, y, x + w, y + h, -1, -1, -1, -1, box),
                             np.float32).reshape(-1, 8)]
-        for k, s in enumerate(lines):
-            for off, col in zip(offsets, s.split("\t"), strict=False):
-                parts.append(at.quads(col, x + 6 + off, y + 4 + k * at.line_height, color))
+        runs = [(col, x + 6 + off, y + 4 + k * at.line_height)
+                for k, s in enumerate(lines)
+                for off, col in zip(offsets, s.split("\t"), strict=False)]
+        parts.append(at.quads_many(runs, color))
         return np.concatenate(parts)
 
     def draw(self, blocks, screen_size) -> None:
         """``blocks``: (lines, x, y[, color]) tuples; negative x or y count from the right or
-        bottom edge."""
+        bottom edge. Blocks equal to the last call's are not laid out or uploaded again."""
+        key = (tuple((tuple(b[0]), *b[1:]) for b in blocks), tuple(screen_size))
+        if key == self._last_key:
+            self._render(self._last_n, screen_size)
+            return
         verts = []
         for blk in blocks:
             lines, x, y = blk[:3]
@@ -155,16 +200,21 @@ class Hud:
             x = screen_size[0] + x - w if x < 0 else x
             y = screen_size[1] + y - h if y < 0 else y
             verts.append(self.block_vertices(lines, x, y, color))
-        if not verts:
+        v = np.concatenate(verts) if verts else np.zeros((0, 8), np.float32)
+        if len(v):
+            self._ensure(len(v))
+            self.vbo.write(v.tobytes())
+        self._last_key, self._last_n = key, len(v)
+        self._render(len(v), screen_size)
+
+    def _render(self, n_vertices: int, screen_size) -> None:
+        if not n_vertices:
             return
-        v = np.concatenate(verts)
-        self._ensure(len(v))
-        self.vbo.write(v.tobytes())
         self.prog["screen"].value = tuple(float(s) for s in screen_size)
         self.texture.use(0)
         self.ctx.enable(self.ctx.BLEND)
         self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
-        self.vao.render(vertices=len(v))
+        self.vao.render(vertices=n_vertices)
         self.ctx.disable(self.ctx.BLEND)
 
 
@@ -175,13 +225,13 @@ def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
     """The HUD's text from a FrameStats-like record (None before the first frame)."""
     lines = [f"{fps:5.1f} FPS" + ("  [paused]" if paused else "")
              + (f"  rain {rain:g}/s" if rain else "")]
-    if stats is None:
-        return lines + [f"display: {path}"]
     w, h = size
     cells = getattr(stats, "water_cells", None)
     lines.append(f"{w}x{h}  {spp} spp  {bounces} bounces  "
-                 + (f"grid {cells[0]}x{cells[1]}" if cells else "no water")
+                 + (f"grid {cells[0]}x{cells[1]}" if cells else "no water" if stats else "")
                  + (f"  caustics {caustics}" if caustics else ""))
+    if stats is None:   # before the first frame (or a rebuild's): the settings, the path
+        return lines + [f"display: {path}"]
     lines.append(f"{stats.n_triangles:,} triangles  {stats.n_rays / 1e6:.2f} M rays/frame")
     ms = sorted(stats.stage_ms.items(), key=lambda kv: -kv[1])
     kernel = sum(v for _, v in ms)

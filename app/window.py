@@ -1,22 +1,27 @@
 """Open an interactive window on a scene: rain, mouse ripples, an orbit camera and a HUD.
 
 Display path: each frame's RGBA8 image is read back without blocking (two frames in flight,
-World.enqueue_frame / read_frame) and uploaded to a GL texture through a pixel buffer, then drawn
-as one quad with the HUD over it. Where the OpenCL device offers cl_khr_gl_sharing the window says
-so, but rendering straight into the GL texture is not implemented (PoCL and pip's pyopencl lack
-the extension, so it could not be tested here): the copy path is always used, and the HUD names it.
+World.enqueue_frame / read_frame) and uploaded to a GL texture through a pixel buffer (--upload
+direct: without one), then drawn as one quad with the HUD over it. Where the OpenCL device
+offers cl_khr_gl_sharing the window says so, but rendering straight into the GL texture is not
+implemented (PoCL and pip's pyopencl lack the extension, so it could not be tested here): the
+copy path is always used, and the start line and the HUD name it.
 
 Mouse: drag on the water makes ripples where the mouse ray meets the water; Shift+drag pushes the
 water along the drag; drag elsewhere orbits; right drag pans; the wheel zooms. Keys: R rain,
-[ ] rain rate, Space pause, N one step, B boat, + - bounces, 1 2 4 samples, G / Shift+G grid,
-S screenshot, C caustics, H help, F2 HUD, F fullscreen, Esc quit.
+[ ] rain rate, Space pause, N one step, B drop a boat above the cursor (the scene's first
+[[boats]]), + - bounces, 1 2 4 samples, G / Shift+G grid, S screenshot, C caustics traced/off,
+H help, F2 HUD, F fullscreen, Esc quit.
 
-Quality: --quality auto (default) measures a few frames at start and picks the water grid,
-render scale, bounce depth and traced caustics (on/off) that hold --target-fps; --quality
-low|medium|high fixes them;
---cells, --scale and --bounces pin their own part. Scripting: --frames N, --screenshot PATH,
---record-events FILE and --events FILE (a deterministic replay: events at their frame indices,
-recorded frame times). Without a display it says so and exits with status 2: use `lbwater capture`.
+Quality: --quality auto (default) shows a small probe World for a few frames at start, measures
+it, and picks the water grid, render scale, bounce depth and caustic photons (the scene's, a
+quarter, a sixteenth, or off) predicted to hold --target-fps; the start line and the HUD say
+what it chose, and where it turned caustics off, C turns on the fewest photons. --quality
+low|medium|high fixes them; --cells, --scale, --bounces and --caustics pin their own part. The
+boats' physics always runs. Scripting: --frames N, --screenshot PATH, --record-events FILE and
+--events FILE (a deterministic replay: events at their frame indices, recorded frame times),
+--report FILE (the settings and the FPS as JSON). Without a display it says so and exits with
+status 2: use `lbwater capture`.
 
     lbwater window scenes/pool.toml --size 1280x720
 """
@@ -43,6 +48,7 @@ from app.controls import (
 from app.errors import InputError, LbwaterError
 
 SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+HUD_REFRESH = 0.25   #: seconds between renewals of the HUD's text
 EVENTS_VERSION = 1
 
 
@@ -69,12 +75,12 @@ def add_arguments(p) -> None:
     p.add_argument("--device", help="OpenCL device: gpu, cpu, P:D or part of a name")
     p.add_argument("--size", help="window size WxH in pixels (default: the scene's [render])")
     p.add_argument("--quality", choices=QUALITIES, default="auto",
-                   help="auto: measure and pick grid, scale and bounces for --target-fps; "
-                        "low/medium/high: fixed presets")
+                   help="auto: measure and pick grid, scale, bounces and caustic photons "
+                        "for --target-fps; low/medium/high: fixed presets")
     p.add_argument("--target-fps", type=float, default=60.0, help="frame rate auto aims for")
     p.add_argument("--caustics", choices=("off", "traced", "projected"),
                    help="caustics under the water (key C in the window); default from "
-                        "[shading] caustics")
+                        "[shading] caustics; given, auto quality keeps the mode")
     p.add_argument("--cells", type=int, help="water cells along the pool's longer side")
     p.add_argument("--scale", type=float, help="image pixels per window pixel, (0, 1]")
     p.add_argument("--bounces", type=int, help="reflection/refraction depth")
@@ -90,6 +96,7 @@ def add_arguments(p) -> None:
                    help="simulated seconds per frame (default: the measured frame interval)")
     p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
                    help="texture upload: through a pixel buffer (default) or directly")
+    p.add_argument("--report", help="write the run's settings and FPS to this JSON file")
 
 
 def check_args(args) -> None:
@@ -107,6 +114,9 @@ def check_args(args) -> None:
         raise InputError(f"--frame-time {args.frame_time} must lie in (0, 1] s")
     if args.screenshot is not None and Path(args.screenshot).suffix.lower() != ".png":
         raise InputError(f"--screenshot {args.screenshot!r} must end in .png")
+    report = getattr(args, "report", None)
+    if report is not None and Path(report).suffix.lower() != ".json":
+        raise InputError(f"--report {report!r} must end in .json")
 
 
 def require_display() -> None:
@@ -118,14 +128,23 @@ def require_display() -> None:
 
 
 # ---- worlds -------------------------------------------------------------------------------------
-def make_world(scene, device, *, size, spp, bounces, cells, caustics=None):
+def make_world(scene, device, *, size, spp, bounces, cells, caustics: str | None = None):
     """The World the window drives (docs/frame_api.md), ``cells`` along the pool's longer side;
-    ``caustics`` False turns the scene's traced caustics off (None keeps the scene's)."""
+    ``caustics`` a mode ("off" | "traced") over the scene's (None keeps the scene's)."""
     from app.world import World
 
     return World(scene, device, width=size[0], height=size[1], spp=spp, bounces=bounces,
-                 cells=None if scene.water is None else cells,
-                 caustics="off" if caustics is False else None)
+                 cells=None if scene.water is None else cells, caustics=caustics)
+
+
+def caustics_label(scene, world) -> str:
+    """What the HUD says of the world's caustics: "off", "traced (N photons)", or ""."""
+    from app.assemble import caustic_settings
+
+    mode = str(getattr(world, "caustics", "") or "")
+    if mode == "traced":
+        return f"traced ({caustic_settings(scene).photons} photons)"
+    return mode
 
 
 def display_path(rt, upload: str = "pbo") -> str:
@@ -147,38 +166,63 @@ def water_of(scene, cells: int | None) -> Water | None:
     return Water(tuple(w.origin), tuple(w.size), float(w.depth), float(w.size[0]) / w.cells[0])
 
 
-def decide_quality(args, scene, rt, window_size, frame_seconds):
-    """The quality for this run (``--quality``, overrides, or a short measurement)."""
+def caustic_scene(scene, photons: int | None):
+    """``scene`` tracing ``photons`` caustic photons per frame, its caustic map's resolution
+    scaled to keep the photons per texel (:func:`app.quality.caustic_map_resolution`); None
+    or the scene's own count: the scene unchanged."""
+    from app.assemble import caustic_settings
+    from app.frames import with_shading
+    from app.quality import caustic_map_resolution
+
+    cs = caustic_settings(scene)
+    if not photons or photons == cs.photons:
+        return scene
+    return with_shading(scene, {"caustic_photons": int(photons), "caustic_resolution":
+                                caustic_map_resolution(photons, cs.photons, cs.resolution)})
+
+
+def decide_quality(args, scene, rt, window_size, frame_seconds, present=None):
+    """The quality for this run (``--quality``, overrides, or a short measurement of a probe
+    World; ``present(world, image)`` shows its frames, as :func:`app.quality.measure` says)."""
     from app import quality as q
+    from app.assemble import caustic_settings
 
     water = scene.water
     max_cells = max(water.cells) if water is not None else 2
     max_bounces = args.bounces if args.bounces is not None else scene.render.bounces
+    cs = caustic_settings(scene)
+    photons = cs.photons if cs.mode == "traced" and water is not None else 0
+    asked = getattr(args, "caustics", None)       # --caustics pins the mode
     if args.quality != "auto":
-        base = q.preset(args.quality, max_cells=max_cells, max_bounces=max(max_bounces, 1))
+        base = q.preset(args.quality, max_cells=max_cells, max_bounces=max(max_bounces, 1),
+                        photons=photons)
         return dataclasses.replace(
             base, cells=args.cells or base.cells, scale=args.scale or base.scale,
-            bounces=base.bounces if args.bounces is None else args.bounces)
+            bounces=base.bounces if args.bounces is None else args.bounces,
+            caustics=None if asked else base.caustics)
     if water is None:
         return q.Quality(2, args.scale or 1.0, max_bounces, "auto (no water)")
-    if args.cells and args.scale and args.bounces is not None:
+    if args.cells and args.scale and args.bounces is not None and (asked or not photons):
         return q.Quality(args.cells, args.scale, args.bounces, "fixed")
     probe_cells = args.cells or min(max_cells, 64)
     probe_size = q.scaled_size(window_size, min(0.5, args.scale or 0.5))
     probe_bounces = min(2, max_bounces) if args.bounces is None else args.bounces
-    world = make_world(scene, rt, size=probe_size, spp=args.spp or 1, bounces=probe_bounces,
-                       cells=probe_cells)
-    stats, wall_ms = q.measure(world, frame_seconds)
-    traced = getattr(world, "caustics", "off") != "off"
-    world.close()
+    probe_photons = min(photons, q.PROBE_PHOTONS)
+    world = make_world(caustic_scene(scene, probe_photons), rt, size=probe_size,
+                       spp=args.spp or 1, bounces=probe_bounces, cells=probe_cells)
+    try:
+        stats, wall_ms = q.measure(world, frame_seconds, present=present)
+    finally:
+        world.close()
     nx, ny = stats[-1].water_cells
     steps = sum(s.lbm_steps for s in stats) / len(stats)
-    costs = q.costs_from_stats(stats, wall_ms, n_cells=nx * ny, steps=steps)
+    costs = q.costs_from_stats(stats, wall_ms, n_cells=nx * ny, steps=steps,
+                               photons=probe_photons)
     return q.choose(costs, target_fps=args.target_fps, window=window_size, max_cells=max_cells,
                     max_bounces=max(max_bounces, 1), aspect=q.aspect_of(water.size),
-                    spp=args.spp or 1, base_cells=probe_cells, caustics=traced,
-                    fixed_cells=args.cells, fixed_scale=args.scale,
-                    fixed_bounces=args.bounces)
+                    spp=args.spp or 1, base_cells=probe_cells, photons=photons,
+                    keep_caustics=asked == "traced", fixed_cells=args.cells,
+                    fixed_scale=args.scale, fixed_bounces=args.bounces)
 
 
 # ---- event files ---------------------------------------------------------------------------
@@ -419,7 +463,7 @@ class Viewer:
         from app.quality import scaled_size
 
         self.glfw = glfw
-        self.scene, self.rt, self.quality = scene, rt, quality
+        self.rt = rt
         self.frame_time = frame_time
         self.replay = replay
         self.recording = [] if record else None
@@ -443,6 +487,13 @@ class Viewer:
         self.fb_size = tuple(glfw.get_framebuffer_size(self.win))
         self._start_window = tuple(window_size)
         self.win_size = tuple(glfw.get_window_size(self.win))
+        self.path = display_path(rt, upload)
+        if callable(quality):   # decided here, its probe frames shown as the window shows
+            glfw.swap_interval(0)   # them, but not waiting for the display's refresh
+            quality = quality(self)
+            glfw.swap_interval(1 if vsync else 0)
+        self.quality = quality
+        self.scene = scene = caustic_scene(scene, quality.photons)
         logical = tuple(replay.header.get("window", self.win_size)) if replay else self.win_size
         c = scene.camera
         bounces = quality.bounces
@@ -452,11 +503,9 @@ class Viewer:
                                  water_of(scene, self.cells), spp=spp, bounces=bounces,
                                  cells=self.cells, window_size=logical, image_size=image,
                                  frame_time=frame_time or 1 / 60)
-        self.path = display_path(rt, upload)
         self.world = make_world(scene, rt, size=image, spp=spp, bounces=bounces,
                                 cells=self.cells, caustics=quality.caustics)
-        if quality.caustics is False:
-            self.controls.caustics = "off"
+        self.controls.caustics = quality.caustics   # C toggles from here; rebuilds keep it
         self.controls.reapply(self.world, camera=False)
         self.next_frame = 0       # index of the next frame to enqueue (event time base)
         self._size_seen = tuple(self.world.size)
@@ -466,6 +515,7 @@ class Viewer:
         self._t_last = None
         self._dt_ema = None
         self.fullscreen_saved = None
+        self._hud = (None, [], None)   # (when, lines, world) of the HUD's text
         self.screenshots: list[Path] = []
         self.last_snapshot = None
         self._keys = {getattr(glfw, f"KEY_{name}"): a for name, a in KEYMAP.items()}
@@ -477,6 +527,24 @@ class Viewer:
         else:  # replay: only Esc from the keyboard
             glfw.set_key_callback(self.win, self._glfw_key_replay)
         glfw.set_framebuffer_size_callback(self.win, self._glfw_fb)
+
+    def present_probe(self, world, img) -> None:
+        """Show a probe World's frame as the loop shows frames (image, HUD, help; swap), so
+        that the auto quality's measurement includes the display's cost."""
+        from app.hud import help_lines, hud_lines
+
+        self.glfw.poll_events()
+        self.presenter.upload(img)
+        ctx = self.ctx
+        ctx.screen.use()
+        ctx.viewport = (0, 0, *self.fb_size)
+        ctx.clear(0.0, 0.0, 0.0, 1.0)
+        self.presenter.draw(self.fb_size)
+        lines = hud_lines(world.stats, fps=0.0, path=self.path, size=tuple(world.size),
+                          device=world.device_name, quality="quality auto: measuring ...",
+                          bounces=world.bounces, caustics=caustics_label(world.scene, world))
+        self.hud.draw([(lines, 8, 8), (help_lines(HELP), -8, -8)], self.fb_size)
+        self.glfw.swap_buffers(self.win)
 
     # -- time -------------------------------------------------------------------------------
     def now(self) -> float:
@@ -593,7 +661,7 @@ class Viewer:
         size = scaled_size(c.window_size, self.quality.scale)
         self.world.close()
         self.world = make_world(self.scene, self.rt, size=size, spp=c.spp, bounces=c.bounces,
-                                cells=self.cells, caustics=False if c.caustics == "off" else None)
+                                cells=self.cells, caustics=c.caustics)
         c.image_size = tuple(self.world.size)
         c.water = water_of(self.scene, self.cells)
         c.reapply(self.world)
@@ -652,8 +720,19 @@ class Viewer:
     def fps(self) -> float:
         return 0.0 if not self._dt_ema else 1.0 / self._dt_ema
 
+    def hud_text(self) -> list[str]:
+        """The HUD's lines for the shown frame (what :meth:`_draw` writes over the image)."""
+        from app.hud import hud_lines
+
+        c = self.controls
+        return hud_lines(self.world.stats, fps=self.fps, path=self.path,
+                         size=tuple(self.world.size), device=self.world.device_name,
+                         quality=self.quality.describe(), paused=c.paused,
+                         rain=c.rain_rate if c.rain_on else 0.0, spp=c.spp, bounces=c.bounces,
+                         caustics=caustics_label(self.scene, self.world))
+
     def _draw(self, swap: bool = True) -> None:
-        from app.hud import guard_lines, help_lines, hud_lines
+        from app.hud import guard_lines, help_lines
 
         ctx, c = self.ctx, self.controls
         ctx.screen.use()
@@ -663,13 +742,12 @@ class Viewer:
         now = self.now()
         blocks = []
         if c.show_hud:
-            lines = hud_lines(self.world.stats, fps=self.fps, path=self.path,
-                              size=tuple(self.world.size), device=self.world.device_name,
-                              quality=self.quality.describe(), paused=c.paused,
-                              rain=c.rain_rate if c.rain_on else 0.0, spp=c.spp,
-                              bounces=c.bounces,
-                              caustics=str(getattr(self.world, "caustics", "") or ""))
-            blocks.append((lines, 8, 8))
+            # the text is renewed HUD_REFRESH s apart (readable, and the HUD's vertices are
+            # then reused between renewals: on a CPU device GL shares its cores)
+            if (self._hud[0] is None or now - self._hud[0] >= HUD_REFRESH
+                    or self._hud[2] is not self.world):
+                self._hud = (now, self.hud_text(), self.world)
+            blocks.append((self._hud[1], 8, 8))
             warn = guard_lines(self.world.stats)
             if warn:
                 blocks.append((warn, -8, 8, (1.0, 0.6, 0.3, 1.0)))
@@ -727,7 +805,8 @@ class Viewer:
     def event_log(self) -> EventLog:
         q = self.quality
         header = {"window": list(self._start_window), "cells": q.cells, "scale": q.scale,
-                  "bounces": q.bounces, "caustics": q.caustics, "spp": self.controls.spp}
+                  "bounces": q.bounces, "caustics": q.caustics, "photons": q.photons,
+                  "spp": self.controls.spp}
         return EventLog(header, list(self.recording or ()))
 
     def close(self) -> None:
@@ -758,18 +837,23 @@ def run(args) -> int:
     if replay is not None:
         h = replay.header
         window_size = tuple(h.get("window", window_size))
+        ca = h.get("caustics")   # files of before 2026-12 wrote false for "off"
         quality = q.Quality(int(h["cells"]), float(h["scale"]), int(h["bounces"]), "replayed",
-                            caustics=h.get("caustics"))
+                            caustics={False: "off", True: "traced"}.get(ca, ca),
+                            photons=h.get("photons"))
         spp = int(h.get("spp", 1))
     else:
-        quality = decide_quality(args, scene, rt, window_size, frame_seconds)
+        def quality(viewer):   # decided once the window is open: the probe shows in it
+            return decide_quality(args, scene, rt, window_size, frame_seconds,
+                                  present=viewer.present_probe)
+        if args.quality != "auto":
+            quality = decide_quality(args, scene, rt, window_size, frame_seconds)
         spp = args.spp or (scene.render.spp if scene.render.spp in (1, 2, 4) else 1)
-    print(f"lbwater window: {rt.name}; {quality.describe()}; display "
-          f"{display_path(rt, args.upload)}",
-          flush=True)
     viewer = Viewer(scene, rt, window_size=window_size, quality=quality, spp=spp,
                     frame_time=args.frame_time, vsync=not args.no_vsync, upload=args.upload,
                     replay=replay, record=bool(args.record_events))
+    print(f"lbwater window: {rt.name}; {viewer.quality.describe()}; display {viewer.path}",
+          flush=True)
     try:
         t0 = time.perf_counter()
         shown = viewer.run(args.frames)
@@ -778,8 +862,29 @@ def run(args) -> int:
             viewer.save_screenshot(args.screenshot, hud=args.screenshot_hud)
         if args.record_events:
             viewer.event_log().write(args.record_events)
-        print(f"lbwater window: {shown} frames in {elapsed:.2f} s "
-              f"({shown / max(elapsed, 1e-9):.1f} FPS)", flush=True)
+        fps = shown / max(elapsed, 1e-9)
+        print(f"lbwater window: {shown} frames in {elapsed:.2f} s ({fps:.1f} FPS)", flush=True)
+        if getattr(args, "report", None):
+            write_report(args.report, viewer, args, shown, elapsed)
     finally:
         viewer.close()
     return 0
+
+
+def write_report(path, viewer, args, shown: int, elapsed: float) -> None:
+    """--report: the run's settings and frame rate as JSON (bench/window_fps.py reads it)."""
+    from app.io import write_json
+
+    q = viewer.quality
+    write_json(path, {
+        "date": time.strftime("%Y-%m-%d %H:%M"), "device": viewer.world.device_name,
+        "gl_renderer": viewer.ctx.info["GL_RENDERER"], "display_path": viewer.path,
+        "scene": str(args.scene), "window": list(viewer._start_window),
+        "image": list(viewer.world.size), "quality": q.describe(), "source": q.source,
+        "cells": q.cells, "scale": q.scale, "bounces": q.bounces,
+        "caustics": viewer.world.caustics, "photons": q.photons, "target_fps": args.target_fps,
+        "predicted_ms": None if q.predicted_ms is None else round(q.predicted_ms, 3),
+        "frames": shown, "seconds": round(elapsed, 3),
+        "frame_ms": round(1e3 * elapsed / max(1, shown), 3),
+        "fps": round(shown / max(elapsed, 1e-9), 2),
+        "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None})

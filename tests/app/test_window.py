@@ -136,6 +136,44 @@ def test_window_renders_frames_and_its_screenshot_is_the_offscreen_render(displa
     assert (diff <= 1).mean() >= 0.99, f"max diff {diff.max()}"
 
 
+def test_auto_quality_probes_in_the_window_and_its_choice_meets_the_target(display, scene,
+                                                                          tmp_path, monkeypatch):
+    """--quality auto with traced caustics: the probe's frames are shown in the window (its
+    display cost is measured), the choice and its caustics are reported, and the frames at the
+    chosen settings meet the target frame time that the model predicted they would."""
+    import json
+
+    from app.cli import main
+    from app.window import Viewer
+
+    path = tmp_path / "caustic.toml"
+    path.write_text(SCENE + '[shading]\ncaustics = "traced"\ncaustic_photons = 4096\n'
+                    'caustic_resolution = 32\n')
+    import glfw
+
+    shown, interval = [], [None]
+    real = Viewer.present_probe
+    monkeypatch.setattr(Viewer, "present_probe", lambda self, world, img: (
+        shown.append((img.shape, interval[0])), real(self, world, img)))
+    # vsync is asked for (no --no-vsync), but a probe that waited for the display's refresh
+    # would time the refresh: the probe's frames are swapped at interval 0
+    monkeypatch.setattr(glfw, "swap_interval", lambda n: interval.__setitem__(0, n))
+    report = tmp_path / "run.json"
+    status = main(["window", str(path), "--size", "96x72", "--quality", "auto",
+                   "--target-fps", "5", "--frames", "12", "--frame-time", str(FRAME_TIME),
+                   "--report", str(report)])
+    assert status == 0
+    assert shown == [((36, 48, 4), 0)] * 6  # warm-up and timed probe frames, at scale 0.5
+    assert interval[0] == 1                 # then vsync, as asked
+    r = json.loads(report.read_text())
+    assert r["source"] == "auto" and r["frames"] == 12 and r["window"] == [96, 72]
+    assert r["fps"] == pytest.approx(r["frames"] / r["seconds"], rel=0.01)
+    assert r["caustics"] in ("traced", "off") and r["photons"] in (4096, 1024)
+    assert ("caustics" in r["quality"]) and r["image"] == [round(96 * r["scale"]),
+                                                           round(72 * r["scale"])]
+    assert r["predicted_ms"] <= 200.0 and r["frame_ms"] <= 200.0   # 5 FPS: 200 ms a frame
+
+
 def test_drag_on_the_water_changes_heights_only_near_the_picked_points(viewer):
     v = viewer
     v.step()
@@ -314,9 +352,11 @@ def test_keys_that_rebuild_keep_the_camera_and_fullscreen_toggles(viewer):
     v.on_button(Button.LEFT, False)
     v.step()
     camera = v.world.camera
-    assert v.world.caustics == "off"                     # the scene's
+    assert v.world.caustics == "off" and v.controls.caustics is None   # the scene's
     v.on_action(Action.TOGGLE_CAUSTICS)
-    assert v.world.caustics == "traced"
+    assert v.world.caustics == "traced" == v.controls.caustics
+    v.step()
+    assert "caustics traced" in "\n".join(v.hud_text())
     for a in (Action.GRID_DOWN, Action.BOUNCES_UP, Action.SPP_2):
         v.on_action(a)
     v.step()
@@ -324,6 +364,13 @@ def test_keys_that_rebuild_keep_the_camera_and_fullscreen_toggles(viewer):
     assert v.world.stats.water_cells == (21, 16)         # 32 / 1.5 along the longer side
     assert (v.world.bounces, v.world.spp) == (2, 2)
     assert v.world.camera == camera and v.world.caustics == "traced"   # kept by the rebuild
+    v.on_action(Action.TOGGLE_CAUSTICS)
+    v.on_action(Action.GRID_UP)
+    v.step()
+    assert v.world.caustics == "off" and "caustics off" in "\n".join(v.hud_text())
+    v.on_action(Action.TOGGLE_CAUSTICS)
+    v.step()
+    v.step()
     assert any(k.startswith("caustics.") for k in v.world.stats.stage_ms)
     v.on_action(Action.FULLSCREEN)
     for _ in range(30):

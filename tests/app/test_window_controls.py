@@ -153,6 +153,33 @@ def test_actions_rain_pause_step_and_rebuild_requests():
     assert c.apply(world).quit
 
 
+def test_b_drops_a_boat_over_the_water_under_the_cursor_or_says_why_not():
+    from app.errors import InputError
+
+    class Boats(FakeWorld):
+        boats = True
+
+        def drop_boat(self, x, y):
+            if not self.boats:
+                raise InputError("drop_boat: the scene has no [[boats]]")
+            self.calls.append(("drop_boat", (x, y)))
+
+    world = Boats()
+    c = make_controls(world)
+    c.cursor(world, 64, 60)
+    c.action(world, Action.DROP_BOAT)
+    (name, (x, y)), = world.calls
+    hit = world.pick(32, 30).pool_xy
+    assert name == "drop_boat" and (x, y) == pytest.approx(hit) and c.message == "boat dropped"
+    c.cursor(world, 1, 1)                    # the sky: nothing to drop onto
+    c.action(world, Action.DROP_BOAT)
+    assert len(world.calls) == 1 and "point at the water" in c.message
+    world.boats = False                      # a World whose scene has no boats: its reason
+    c.cursor(world, 64, 60)
+    c.action(world, Action.DROP_BOAT)
+    assert len(world.calls) == 1 and c.message == "drop_boat: the scene has no [[boats]]"
+
+
 def test_action_names_round_trip_and_unknown_names_list_the_valid_ones():
     assert Action.from_str("toggle_rain") is Action.TOGGLE_RAIN
     with pytest.raises(ValueError, match="valid: quit, toggle_rain"):
@@ -175,29 +202,73 @@ def test_auto_quality_picks_smaller_settings_on_a_slower_device():
     assert fast.predicted_ms <= 50.0
     assert (slow.cells, slow.scale, slow.bounces) != (fast.cells, fast.scale, fast.bounces)
     assert slow.cells <= fast.cells and slow.scale <= fast.scale and slow.bounces <= fast.bounces
-    # the choice is monotone in the device's speed
+    # the choice is monotone in the device's speed, from the best rung to the least
     picks = [choose(COSTS.scaled(f)) for f in (0.01, 0.1, 1, 10, 100)]
     rank = q.ladder(200, 5)
-    idx = [rank.index((p.cells, p.scale, p.bounces, False)) for p in picks]
+    idx = [rank.index((p.cells, p.scale, p.bounces, 0)) for p in picks]
     assert idx == sorted(idx) and idx[0] == 0 and idx[-1] == len(rank) - 1
+    assert picks[-1].predicted_ms > 50.0    # nothing fits: the last rung, and it says so
 
 
-def test_expensive_caustics_are_turned_off_before_the_picture_gets_coarse():
-    costs = dataclasses.replace(COSTS, caustics=900.0)   # PoCL's photons: 0.9 s a frame
-    pick = choose(costs, caustics=True)
-    assert pick.caustics is False and pick.scale >= 0.5 and pick.predicted_ms <= 50
-    cheap = choose(dataclasses.replace(COSTS, caustics=0.01), caustics=True, target_fps=1)
-    assert cheap.caustics is None                        # kept: the scene's setting
-    assert "caustics off" in pick.describe() and "caustics" not in cheap.describe()
-    assert q.preset("low", max_cells=200, max_bounces=5).caustics is False
+def test_steps_that_save_little_wait_until_they_matter():
+    # the water grid costs little beside the rays (as on a CPU): coarser grids are not rungs
+    rays = dataclasses.replace(COSTS, per_cell_step=1e-9, per_cell=1e-9)
+    least = choose(rays.scaled(1000.0))
+    assert least.cells == 200 and least.scale == 0.25 and least.bounces == 1
+    # caustics that cost nothing stay on while the scale drops
+    free = choose(dataclasses.replace(COSTS, caustics=0.01, caustic_photons=P), photons=P)
+    assert free.caustics is None and free.photons == P and free.scale == 0.5
+    # caustics that cost much: bounces go later, once their saving matters (not never)
+    dear = dataclasses.replace(COSTS, caustics=900.0, caustic_photons=P)
+    rungs = q.ladder(200, 5, P, worth=lambda a, b: q.predict_ms(
+        dear, cells=b.cells, aspect=0.75, scale=b.scale, bounces=b.bounces, window=(640, 360),
+        photons=b.photons) <= 0.95 * q.predict_ms(
+        dear, cells=a.cells, aspect=0.75, scale=a.scale, bounces=a.bounces, window=(640, 360),
+        photons=a.photons))
+    assert all(r.bounces == 5 for r in rungs if r.photons == P)   # photons go first here
+    assert [r.bounces for r in rungs if r.photons == 0][0] == 2      # bounces followed
+
+
+P = 262144   # the pool scene's caustic photons
+
+
+def test_expensive_caustics_are_turned_down_then_off_before_the_picture_gets_coarse():
+    costs = dataclasses.replace(COSTS, caustics=900.0, caustic_photons=65536)  # 3.6 s at P
+    pick = choose(costs, photons=P)
+    assert pick.caustics == "off" and pick.scale >= 0.5 and pick.predicted_ms <= 50
+    assert pick.photons == P // 16          # what C turns on: the fewest photons
+    assert "caustics off" in pick.describe()
+    mid = choose(dataclasses.replace(costs, caustics=30.0), photons=P, target_fps=10)
+    assert mid.caustics is None and mid.photons in (P // 4, P // 16) and mid.predicted_ms <= 100
+    assert f"caustics traced ({mid.photons} photons)" in mid.describe()
+    cheap = choose(dataclasses.replace(COSTS, caustics=0.01, caustic_photons=P), photons=P,
+                   target_fps=1)
+    assert cheap.caustics is None and cheap.photons == P    # kept: the scene's setting
+    kept = choose(costs, photons=P, keep_caustics=True)      # --caustics traced
+    assert kept.caustics is None and kept.photons == P // 16 and "caustics" in kept.source
+    assert "caustics" not in choose(COSTS).describe()        # a scene without them
+    # the cost model: linear in the photons; the map's side with their square root
+    assert costs.caustic_ms(P) == pytest.approx(3600.0) and costs.caustic_ms(0) == 0.0
+    assert q.caustic_levels(P) == [P, P // 4, P // 16] and q.caustic_levels(2048) == [2048, 1024]
+    assert [q.caustic_map_resolution(p, P, 256) for p in q.caustic_levels(P)] == [256, 128, 64]
+
+
+def test_presets_turn_caustics_down_or_off():
+    low, med, high = (q.preset(n, max_cells=200, max_bounces=5, photons=P)
+                      for n in ("low", "medium", "high"))
+    assert (low.caustics, low.photons) == ("off", P // 16)
+    assert (med.caustics, med.photons) == (None, P // 4)
+    assert (high.caustics, high.photons) == (None, P)
+    assert q.preset("low", max_cells=200, max_bounces=5).photons is None   # no caustics
 
 
 def test_ladder_rungs_never_cost_more_and_overrides_pin_their_part():
-    rungs = q.ladder(200, 5, caustics=True)
-    costs = dataclasses.replace(COSTS, caustics=5.0)
+    rungs = q.ladder(200, 5, photons=P)
+    costs = dataclasses.replace(COSTS, caustics=5.0, caustic_photons=P)
     ms = [q.predict_ms(costs, cells=c, aspect=0.75, scale=s, bounces=b, window=(640, 360),
-                       caustics=k) for c, s, b, k in rungs]
-    assert rungs[0] == (200, 1.0, 5, True) and rungs[-1] == (32, 0.25, 1, False)
+                       photons=k) for c, s, b, k in rungs]
+    assert rungs[0] == (200, 1.0, 5, P) and rungs[-1] == (32, 0.25, 1, 0)
+    assert [k for k in dict.fromkeys(r.photons for r in rungs)] == [P, P // 4, P // 16, 0]
     assert all(b <= a for a, b in zip(ms, ms[1:], strict=False))
     pinned = choose(COSTS.scaled(100.0), fixed_scale=1.0, fixed_bounces=3)
     assert pinned.scale == 1.0 and pinned.bounces == 3 and "fixed" in pinned.source
@@ -211,10 +282,11 @@ def test_costs_from_probe_stats_recover_the_units():
         n_rays = 1000
         rays_per_depth = (800, 200)
 
-    c = q.costs_from_stats([S, S], wall_ms=33.0, n_cells=100, steps=2)
+    c = q.costs_from_stats([S, S], wall_ms=33.0, n_cells=100, steps=2, photons=4096)
     assert c.per_cell_step == pytest.approx(0.02) and c.per_cell == pytest.approx(0.02)
     assert c.per_ray == pytest.approx(0.02) and c.fixed == pytest.approx(4.0)
-    assert c.caustics == pytest.approx(3.0)
+    assert c.caustics == pytest.approx(3.0) and c.caustic_photons == 4096
+    assert c.caustic_ms(8192) == pytest.approx(6.0)
     assert c.ray_ratio == pytest.approx((1.0, 0.25))
 
 
@@ -258,6 +330,8 @@ def test_hud_lines_show_fps_stages_grid_rays_device_and_guard_warnings():
         assert want in text
     assert guard_lines(Stats) == ["water: 7 cell updates limited (max Froude 0.91)"]
     assert hud_lines(None, fps=0, path="copy")[-1] == "display: copy"
+    before = hud_lines(None, fps=0, path="copy", size=(64, 48), caustics="off")
+    assert "caustics off" in before[1] and "grid" not in before[1]
     assert help_lines([("R", "rain")])[1] == "R\train"
 
 
@@ -270,6 +344,26 @@ def test_glyph_atlas_has_ink_for_letters_and_none_for_space():
     assert at.image[y:y + ch, x:x + cw].max() == 0
     assert at.quads("ab c", 0, 0, (1, 1, 1, 1)).shape == (18, 8)   # 3 glyphs, 6 vertices each
     assert math.isclose(at.text_width("ab"), at.advance["a"] + at.advance["b"])
+
+
+def test_glyph_quads_sit_at_the_pen_position_with_the_glyphs_atlas_box():
+    at = GlyphAtlas(14)
+    (H, W), (cw, ch) = at.image.shape, at.cell
+    runs = [("a c", 10.0, 20.0), ("", 0.0, 0.0), ("\x01", 5.0, 40.0)]
+    v = at.quads_many(runs, (0.1, 0.2, 0.3, 0.4)).reshape(-1, 6, 8)
+    assert v.shape == (3, 6, 8)                     # a, c and '?' for the unprintable
+    want = [("a", 10.0, 20.0), ("c", 10.0 + at.advance["a"] + at.advance[" "], 20.0),
+            ("?", 5.0, 40.0)]
+    for quad, (c, x, y) in zip(v, want, strict=True):
+        ax, ay = at.boxes[c]
+        assert quad[:, 0].min() == pytest.approx(x) and quad[:, 0].max() == pytest.approx(x + cw)
+        assert quad[:, 1].min() == pytest.approx(y) and quad[:, 1].max() == pytest.approx(y + ch)
+        assert quad[:, 2].min() == pytest.approx(ax / W) and quad[:, 3].max() == pytest.approx(
+            (ay + ch) / H)
+        # each corner's uv goes with its position: u grows with x, v with y
+        assert np.allclose((quad[:, 0] - x) / cw, (quad[:, 2] * W - ax) / cw)
+        assert np.allclose((quad[:, 1] - y) / ch, (quad[:, 3] * H - ay) / ch)
+        assert np.allclose(quad[:, 4:], (0.1, 0.2, 0.3, 0.4))
 
 
 def test_tab_columns_line_up_across_a_block():

@@ -127,10 +127,12 @@ def test_the_window_key_toggles_the_worlds_caustics_and_a_rebuilt_world_keeps_th
     c = Controls(OrbitCamera.from_look((0.5, 1.4, -0.3), (0.5, 0.0, 0.55), 50.0),
                  Water((0, 0, 0), (1, 1), 0.3, 1 / 16), window_size=(48, 32),
                  image_size=(48, 32))
+    assert c.caustics is None                 # no choice yet: the world keeps the scene's
     c.action(on, Action.TOGGLE_CAUSTICS)
-    assert on.caustics == "off" and c.caustics is False
+    assert on.caustics == "off" and c.caustics == "off"   # the mode string, as the world's
+    assert c.status_message(0.0) == "caustics off"
     c.action(on, Action.TOGGLE_CAUSTICS)
-    assert on.caustics == "traced"
+    assert on.caustics == "traced" and c.caustics == "traced"
     c.action(on, Action.TOGGLE_CAUSTICS)
     rebuilt = World(flat, rt, caustics="traced")
     c.reapply(rebuilt)
@@ -145,3 +147,21 @@ def test_with_shading_overrides_caustics_for_capture_and_window(tmp_path):
         "[shading_unused]")[0], tmp_path / "bare.toml")
     assert bare.shading is None
     assert caustic_settings(with_shading(bare, {"caustics": "traced"})).mode == "traced"
+
+
+def test_fewer_photons_keep_the_photons_per_texel_and_light_the_floor_alike(flat, rt):
+    """The window's caustic levels (app.window.caustic_scene): a quarter of the photons on a
+    map of half the side; under flat water the floor's irradiance is the same."""
+    from app.assemble import caustic_settings
+    from app.window import caustic_scene
+
+    assert caustic_scene(flat, None) is flat and caustic_scene(flat, 4096) is flat
+    quarter = caustic_scene(flat, 1024)
+    s = caustic_settings(quarter, "traced")
+    assert (s.photons, s.resolution) == (1024, 16)
+    full, less = World(flat, rt, caustics="traced"), World(quarter, rt, caustics="traced")
+    full.frame(0.0)
+    less.frame(0.0)
+    a, b = full.read_caustics()["floor"], less.read_caustics()["floor"]
+    assert a.shape == (32, 32, 3) and b.shape == (16, 16, 3)
+    assert np.allclose(b[2:-2, 2:-2], a[16, 16], rtol=1e-3)   # the same sunlight, coarser
