@@ -35,10 +35,12 @@ inline float3 shadow_transmittance(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                    float tmax, int medium)
 {
     if (!prm->transmissive_shadows)
-        return scene_any_hit(SCENE_ARGS, org, dir, 0.0f, tmax) ? (float3)(0.0f) : (float3)(1.0f);
+        return scene_any_hit_kind(SCENE_ARGS, org, dir, 0.0f, tmax, TRACE_KIND_SHADOW)
+                   ? (float3)(0.0f) : (float3)(1.0f);
     float3 T = (float3)(1.0f);
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
-        const Hit h = scene_closest_hit(SCENE_ARGS, org, dir, 0.0f, tmax);
+        const Hit h = scene_closest_hit_kind(SCENE_ARGS, org, dir, 0.0f, tmax,
+                                             TRACE_KIND_SHADOW | (k ? TRACE_CONTINUE : 0));
         if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;

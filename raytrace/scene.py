@@ -36,8 +36,15 @@ from raytrace.sort import make_sorter
 TRANSFORM_DTYPE = np.dtype([("r0", np.float32, 4), ("r1", np.float32, 4),
                             ("r2", np.float32, 4)])
 TLAS_LEAF_SIZE = 1
-TRACE_STATS_LEN = 4
 TRACE_STAT_OVERFLOW = 0
+#: The traversal work counters of TRACE_COUNT builds (kernels/scene.h): ray kinds and fields.
+TRACE_KINDS = ("query", "primary", "secondary", "shadow", "photon")
+TRACE_COUNT_FIELDS = ("rays", "traversals", "tlas_nodes", "blas_entries", "blas_nodes",
+                      "tri_tests", "hits", "spare")
+TRACE_COUNT_INST = 8
+TRACE_STAT_COUNT = 4
+TRACE_STAT_INST = TRACE_STAT_COUNT + len(TRACE_KINDS) * len(TRACE_COUNT_FIELDS)
+TRACE_STATS_LEN = TRACE_STAT_INST + len(TRACE_KINDS) * TRACE_COUNT_INST
 BOUNDS_WG = 256
 
 
@@ -357,6 +364,29 @@ class Scene:
         self._morton()
         self._tlas_sorter.enqueue()
         self._hier()
+
+    # -- traversal work (TRACE_COUNT builds) ------------------------------------------------
+    def reset_trace_counts(self) -> None:
+        """Zero the work counters (the overflow guard stays)."""
+        n = TRACE_STATS_LEN - TRACE_STAT_COUNT
+        cl.enqueue_fill_buffer(self.rt.queue, self.trace_stats, np.uint32(0),
+                               4 * TRACE_STAT_COUNT, 4 * n)
+
+    def trace_counts(self) -> dict:
+        """The work counters since the last reset, per ray kind: ``{kind: {field: n}}`` with
+        the fields of :data:`TRACE_COUNT_FIELDS` and ``blas_nodes_by_instance`` (a list; ids
+        past the last slot share it). All zero unless the kernels were built with
+        ``TRACE_COUNT=1`` (``Runtime(defines={"TRACE_COUNT": 1})``). Synchronises."""
+        st = self.rt.to_host(self.trace_stats, np.uint32, TRACE_STATS_LEN)
+        nf = len(TRACE_COUNT_FIELDS)
+        out = {}
+        for k, kind in enumerate(TRACE_KINDS):
+            base = TRACE_STAT_COUNT + k * nf
+            rec = {f: int(st[base + i]) for i, f in enumerate(TRACE_COUNT_FIELDS)}
+            ib = TRACE_STAT_INST + k * TRACE_COUNT_INST
+            rec["blas_nodes_by_instance"] = [int(x) for x in st[ib:ib + TRACE_COUNT_INST]]
+            out[kind] = rec
+        return out
 
     # -- kernels' view ----------------------------------------------------------------------
     def trace_args(self) -> list:
