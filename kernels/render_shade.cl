@@ -29,18 +29,25 @@ __kernel void render_shade(RENDER_GEOM_PARAMS, __constant const RenderParams* pr
 /* Fraction of light reaching org along dir within tmax. Opaque scenes: one any-hit query.
  * With dielectrics (transmissive_shadows), the ray goes straight through up to
  * RENDER_MAX_SHADOW_CROSSINGS dielectric surfaces, times (1 - Fresnel) at each and Beer-Lambert
- * inside (no refraction bending: no caustics). */
+ * inside (no refraction bending: no caustics). There, first an any-hit query of the opaque-only
+ * instances (RENDER_MASK_OPAQUE: it ends at the first blocker and never enters the water's
+ * tree), then the crossings, closest hit by closest hit, of the instances that hold a
+ * dielectric (RENDER_MASK_TRANSMISSIVE; an opaque triangle there still blocks). */
 inline float3 shadow_transmittance(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                    __constant const RenderParams* prm, float3 org, float3 dir,
                                    float tmax, int medium)
 {
     if (!prm->transmissive_shadows)
-        return scene_any_hit_kind(SCENE_ARGS, org, dir, 0.0f, tmax, TRACE_KIND_SHADOW)
+        return scene_any_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax, ~0u, TRACE_KIND_SHADOW)
                    ? (float3)(0.0f) : (float3)(1.0f);
+    if (scene_any_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax, RENDER_MASK_OPAQUE,
+                             TRACE_KIND_SHADOW))
+        return (float3)(0.0f);
     float3 T = (float3)(1.0f);
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
-        const Hit h = scene_closest_hit_kind(SCENE_ARGS, org, dir, 0.0f, tmax,
-                                             TRACE_KIND_SHADOW | (k ? TRACE_CONTINUE : 0));
+        const Hit h = scene_closest_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax,
+                                               RENDER_MASK_TRANSMISSIVE,
+                                               TRACE_KIND_SHADOW | TRACE_CONTINUE);
         if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;

@@ -452,10 +452,11 @@ TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
 }
 #endif
 
-/* The whole scene: the TLAS over instances, each instance's BLAS in its object space. `work`:
-   the counters of a TRACE_COUNT build (unused otherwise). */
+/* The whole scene: the TLAS over instances, each instance's BLAS in its object space; only
+   instances whose visibility mask shares a bit with `mask`. `work`: the counters of a
+   TRACE_COUNT build (unused otherwise). */
 TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
-                                   bool any, Hit* hit, uint* work, uint* inst_work) {
+                                   bool any, uint mask, Hit* hit, uint* work, uint* inst_work) {
     hit->t = INFINITY;
     hit->u = 0.0f;
     hit->v = 0.0f;
@@ -485,7 +486,7 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
                     int id = tlas_prims[k];
                     __global const Instance* ins = instances + id;
                     int broot = ins->blas_root;
-                    if (broot < 0) continue;
+                    if (broot < 0 || !(ins->mask & mask)) continue;
                     float4 m0 = ins->object_from_world[0], m1 = ins->object_from_world[1],
                            m2 = ins->object_from_world[2];
                     float3 o = (float3)(dot(m0.xyz, org) + m0.w, dot(m1.xyz, org) + m1.w,
@@ -516,13 +517,13 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
 
 /* trace_scene_walk, its work added to kind's counters in a TRACE_COUNT build. */
 TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
-                              bool any, Hit* hit, int kind) {
+                              bool any, uint mask, Hit* hit, int kind) {
 #if TRACE_COUNT
     uint work[TRACE_COUNT_FIELDS], inst_work[TRACE_COUNT_INST];
     for (int f = 0; f < TRACE_COUNT_FIELDS; ++f) work[f] = 0;
     for (int f = 0; f < TRACE_COUNT_INST; ++f) inst_work[f] = 0;
     bool found =
-        trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, hit, work, inst_work);
+        trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, work, inst_work);
     work[TRACE_CNT_RAYS] = (kind & TRACE_CONTINUE) ? 0u : 1u;
     work[TRACE_CNT_TRAVERSALS] = 1u;
     work[TRACE_CNT_HITS] = found ? 1u : 0u;
@@ -535,38 +536,40 @@ TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, 
         if (inst_work[f]) atomic_add(ci + f, inst_work[f]);
     return found;
 #else
-    return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, hit, 0, 0);
+    return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, 0, 0);
 #endif
 }
 
-/* Closest hit in [tmin, tmax): prim/inst -1 and t INFINITY on a miss. `kind` (scene.h:
-   TRACE_KIND_*, optionally | TRACE_CONTINUE) names the ray for the TRACE_COUNT counters. */
-TRACE_INLINE Hit scene_closest_hit_kind(SCENE_PARAMS, float3 org, float3 dir, float tmin,
-                                        float tmax, int kind) {
+/* Closest hit in [tmin, tmax) among the instances whose mask shares a bit with `mask`: prim
+   and inst -1, t INFINITY on a miss. `kind` (scene.h: TRACE_KIND_*, optionally | TRACE_CONTINUE)
+   names the ray for the TRACE_COUNT counters. */
+TRACE_INLINE Hit scene_closest_hit_masked(SCENE_PARAMS, float3 org, float3 dir, float tmin,
+                                          float tmax, uint mask, int kind) {
     Hit h;
-    trace_scene(SCENE_ARGS, org, dir, tmin, tmax, false, &h, kind);
+    trace_scene(SCENE_ARGS, org, dir, tmin, tmax, false, mask, &h, kind);
     return h;
 }
 
-TRACE_INLINE Hit scene_closest_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
-    return scene_closest_hit_kind(SCENE_ARGS, org, dir, tmin, tmax, TRACE_KIND_QUERY);
+/* Is any of those instances hit in [tmin, tmax)? (shadow rays; ends at the first hit found) */
+TRACE_INLINE bool scene_any_hit_masked(SCENE_PARAMS, float3 org, float3 dir, float tmin,
+                                       float tmax, uint mask, int kind) {
+    Hit h;
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, mask, &h, kind);
 }
 
-/* Is anything hit in [tmin, tmax)? (shadow rays) */
-TRACE_INLINE bool scene_any_hit_kind(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
-                                     int kind) {
-    Hit h;
-    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, &h, kind);
+/* The same over every instance. */
+TRACE_INLINE Hit scene_closest_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
+    return scene_closest_hit_masked(SCENE_ARGS, org, dir, tmin, tmax, ~0u, TRACE_KIND_QUERY);
 }
 
 TRACE_INLINE bool scene_any_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
-    return scene_any_hit_kind(SCENE_ARGS, org, dir, tmin, tmax, TRACE_KIND_QUERY);
+    return scene_any_hit_masked(SCENE_ARGS, org, dir, tmin, tmax, ~0u, TRACE_KIND_QUERY);
 }
 
 /* Any hit, and which one was found first (not necessarily the closest). */
 TRACE_INLINE bool scene_any_hit_record(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
                                        Hit* h) {
-    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, h, TRACE_KIND_QUERY);
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, ~0u, h, TRACE_KIND_QUERY);
 }
 
 #endif
