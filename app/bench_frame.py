@@ -38,6 +38,8 @@ def add_arguments(p) -> None:
     p.add_argument("--boats", type=int, metavar="N",
                    help="float N copies of the scene's first [[boats]] (0.5 m, in a grid) to "
                         "time the bodies stage; default: the scene's boats")
+    p.add_argument("--per-depth", action="store_true",
+                   help="time the renderer's stages per depth level (render.shadow.d0, ...)")
     p.add_argument("--rebuild", action="store_true",
                    help="rebuild the water BVH every frame instead of refitting it")
 
@@ -95,6 +97,8 @@ def run(args) -> int:
     for cells in args.cells:
         world = World(scene, rt, width=args.size[0], height=args.size[1], cells=cells,
                       rebuild_water_bvh=args.rebuild, caustics=args.caustics)
+        if getattr(args, "per_depth", False):
+            world.renderer.set_stage_per_depth(True)
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -137,6 +141,7 @@ def run(args) -> int:
                "bvh": "rebuild" if args.rebuild else "refit",
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,
+               "rays_per_depth": " ".join(str(n) for n in st.rays_per_depth),
                "wall_ms": round(wall_ms, 3),
                "latency_ms": round(statistics.median(latency) * 1e3, 3),
                "fps": round(1e3 / wall_ms, 1),

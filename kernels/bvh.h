@@ -96,13 +96,14 @@ typedef struct {
    mesh's space with it; t is unchanged by an affine map). blas_root: root node of the mesh's BVH in
    the scene's node array, binary or wide by the scene's layout (-1: empty mesh). mesh: mesh id.
    prim_base: the mesh's first triangle in the scene-wide numbering (sum of the triangle counts of
-   the meshes added before it). */
+   the meshes added before it). mask: visibility bits; a ray traced with a mask sees the instance
+   only when the two share a bit (all bits by default: raytrace.scene.Scene.set_instance_mask). */
 typedef struct {
     float4 object_from_world[3];
     int blas_root;
     int mesh;
     int prim_base;
-    int pad;
+    uint mask;
 } Instance;
 
 /* A float and an int that order alike: a < b as floats iff ordered(a) < ordered(b) as ints. */

@@ -7,7 +7,8 @@
 /* Instance records, normal transforms and world boxes from the scene's transform buffer (one
    Transform row per instance: world_from_object, xyz = the 3x3 part, w = translation; written
    by the host or by a device stage) and each mesh's BLAS header (root and object box). The
-   BLAS root is the binary root of the header, or with `wide` the mesh's wide root. The
+   BLAS root is the binary root of the header, or with `wide` the mesh's wide root; the
+   visibility mask is the host's (inst_mask, Scene.set_instance_mask). The
    inverse is computed here in float with cofactors; the host rejects singular transforms (a
    device writer must not write one). normals[i]: the inverse transpose of the 3x3 part (w = 0),
    the shading normals' transform. The world box is Arvo's transformed box, widened by a few ulps
@@ -17,7 +18,7 @@ void tlas_prep(int n_inst, __global const Transform* restrict xforms,
                __global const int* restrict inst_mesh, __global const int* restrict mesh_prim_base,
                __global const BvhInfo* restrict blas_infos,
                __global const int* restrict mesh_wide_root, int wide,
-               __global Instance* restrict instances, __global Transform* restrict normals,
+               __global const uint* restrict inst_mask, __global Instance* restrict instances, __global Transform* restrict normals,
                __global float4* restrict boxes, __global BvhInfo* tlas_info) {
     __local float lmin[3 * BOUNDS_WG], lmax[3 * BOUNDS_WG];
     int i = get_global_id(0);
@@ -42,7 +43,7 @@ void tlas_prep(int n_inst, __global const Transform* restrict xforms,
         ins.blas_root = bi.root >= 0 && wide ? mesh_wide_root[mesh] : bi.root;
         ins.mesh = mesh;
         ins.prim_base = mesh_prim_base[mesh];
-        ins.pad = 0;
+        ins.mask = inst_mask[i];
         instances[i] = ins;
         /* inverse transpose: its rows are the columns of the inverse, i.e. cofactors / det */
         Transform nx;

@@ -73,7 +73,8 @@ __kernel void caustics_photons(SCENE_PARAMS, RENDER_GEOM_PARAMS, const CausticPa
         float3 org = photon_start(&cp, i, &d, &phi);
         int medium = RENDER_NO_MEDIUM;
         for (int k = 0; k < CAUSTIC_MAX_HITS; k++) {
-            const Hit h = scene_closest_hit(SCENE_ARGS, org, d, 0.0f, INFINITY);
+            const Hit h = scene_closest_hit_masked(SCENE_ARGS, org, d, 0.0f, INFINITY, ~0u,
+                                                   TRACE_KIND_PHOTON | (k ? TRACE_CONTINUE : 0));
             if (h.prim < 0) break;
             const Surface s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
             const Material m = g_mat[s.material];

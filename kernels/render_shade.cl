@@ -29,16 +29,24 @@ __kernel void render_shade(RENDER_GEOM_PARAMS, __constant const RenderParams* pr
 /* Fraction of light reaching org along dir within tmax. Opaque scenes: one any-hit query.
  * With dielectrics (transmissive_shadows), the ray goes straight through up to
  * RENDER_MAX_SHADOW_CROSSINGS dielectric surfaces, times (1 - Fresnel) at each and Beer-Lambert
- * inside (no refraction bending: no caustics). */
+ * inside (no refraction bending: no caustics). There, first an any-hit query of the opaque-only
+ * instances (RENDER_MASK_OPAQUE: it ends at the first blocker and never enters the water's
+ * tree), then the crossings, closest hit by closest hit, of the instances that hold a
+ * dielectric (RENDER_MASK_TRANSMISSIVE; an opaque triangle there still blocks). */
 inline float3 shadow_transmittance(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                    __constant const RenderParams* prm, float3 org, float3 dir,
                                    float tmax, int medium)
 {
-    if (!prm->transmissive_shadows)
-        return scene_any_hit(SCENE_ARGS, org, dir, 0.0f, tmax) ? (float3)(0.0f) : (float3)(1.0f);
+    /* one any-hit call site for both cases (one traversal less inlined) */
+    const uint opaque = prm->transmissive_shadows ? RENDER_MASK_OPAQUE : ~0u;
+    if (scene_any_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))
+        return (float3)(0.0f);
+    if (!prm->transmissive_shadows) return (float3)(1.0f);
     float3 T = (float3)(1.0f);
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
-        const Hit h = scene_closest_hit(SCENE_ARGS, org, dir, 0.0f, tmax);
+        const Hit h = scene_closest_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax,
+                                               RENDER_MASK_TRANSMISSIVE,
+                                               TRACE_KIND_SHADOW | TRACE_CONTINUE);
         if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;
@@ -98,12 +106,20 @@ inline void shadow_ray(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Render
         }
         const float ndl = dot(nf_s, ldir);
         if (ndl <= 0.0f || dot(nf_g, ldir) <= 0.0f || max3(E) <= 0.0f) continue;
+        const float rv = fmax(dot(reflect_dir(-ldir, nf_s), -d), 0.0f);
+        const float spec = m.specular.w > 0.0f ? pow(rv, m.specular.w) : 1.0f;
+        const float3 brdf = s.kd * ndl + m.specular.xyz * spec;
+        /* light that adds less than min_weight to the pixel (the cut-off of children) is added
+         * unshadowed, with no shadow ray: e.g. the water's sharp highlight away from the sun's
+         * mirror direction, a third of the pool's shadow rays. Unoccluded, the same sum. */
+        if (max3(w * E * brdf) < prm->min_weight) {
+            sum += E * brdf;
+            continue;
+        }
         const float3 T = shadow_transmittance(SCENE_ARGS, RENDER_GEOM_ARGS, prm, org, ldir, dist,
                                               r.medium);
         if (max3(T) <= 0.0f) continue;
-        const float rv = fmax(dot(reflect_dir(-ldir, nf_s), -d), 0.0f);
-        const float spec = m.specular.w > 0.0f ? pow(rv, m.specular.w) : 1.0f;
-        sum += T * E * (s.kd * ndl + m.specular.xyz * spec);
+        sum += T * E * brdf;
     }
     radiance[i] += (float4)(w * sum, 0.0f);
 }

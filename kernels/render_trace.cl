@@ -5,12 +5,13 @@
 #include "render_surface.h"
 #include "traverse.h"
 
-inline Hit trace_ray(SCENE_PARAMS, const Ray* r)
+inline Hit trace_ray(SCENE_PARAMS, const Ray* r, uint depth)
 {
     Hit h = {INFINITY, 0.0f, 0.0f, -1, -1};
     if (r->wr + r->wg + r->wb > 0.0f)   /* dead padding rays have zero weight */
-        h = scene_closest_hit(SCENE_ARGS, (float3)(r->ox, r->oy, r->oz),
-                              (float3)(r->dx, r->dy, r->dz), 0.0f, INFINITY);
+        h = scene_closest_hit_masked(SCENE_ARGS, (float3)(r->ox, r->oy, r->oz),
+                                     (float3)(r->dx, r->dy, r->dz), 0.0f, INFINITY, ~0u,
+                                     depth ? TRACE_KIND_SECONDARY : TRACE_KIND_PRIMARY);
     return h;
 }
 
@@ -22,7 +23,7 @@ __kernel void render_trace(SCENE_PARAMS, __global const Ray* restrict rays,
     const uint n = counts[depth];
     for (uint i = get_global_id(0); i < n; i += get_global_size(0)) {
         const Ray r = rays[i];
-        hits[i] = trace_ray(SCENE_ARGS, &r);
+        hits[i] = trace_ray(SCENE_ARGS, &r, depth);
     }
 }
 
@@ -37,7 +38,7 @@ __kernel void render_trace_shade(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     const uint n = counts[depth];
     for (uint i = get_global_id(0); i < n; i += get_global_size(0)) {
         const Ray r = rays[i];
-        const Hit h = trace_ray(SCENE_ARGS, &r);
+        const Hit h = trace_ray(SCENE_ARGS, &r, depth);
         hits[i] = h;
         shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
                   write_aov);

@@ -15,6 +15,10 @@
 #define RENDER_SCAN_BLOCK (RENDER_SCAN_WG * RENDER_SCAN_PER_ITEM)
 /* Shadow rays cross at most this many transmissive (dielectric) surfaces; more means dark. */
 #define RENDER_MAX_SHADOW_CROSSINGS 4
+/* Instance visibility bits (kernels/bvh.h Instance.mask, set by RenderScene): every triangle
+   opaque, or some dielectric (water, glass); each instance has exactly one. */
+#define RENDER_MASK_OPAQUE 1u
+#define RENDER_MASK_TRANSMISSIVE 2u
 
 /* enum SamplePattern */
 #define SAMPLE_CENTER 0

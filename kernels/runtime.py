@@ -132,13 +132,16 @@ class Runtime:
     """A device, its context and its profiling queue; builds and caches programs and kernels."""
 
     def __init__(self, device: cl.Device | str | None = None, *, profiling: bool = True,
-                 bvh_layout: str | None = None, kernel_arg_info: bool = True):
+                 bvh_layout: str | None = None, kernel_arg_info: bool = True,
+                 defines: dict | None = None):
         """``bvh_layout``: how scenes store their BLASes for traversal, ``"binary"`` or
         ``"wide"`` (raytrace.bvh_wide); default ``LBWATER_BVH_LAYOUT`` or, unset, binary on a GPU
         and wide on a CPU. Every program is built with the matching ``TRACE_WIDE`` define unless
         its defines name one. ``kernel_arg_info``: build with ``-cl-kernel-arg-info`` so
         kernels.launch reads argument names off the device (False: from the sources, the
-        fallback for devices without argument info; tests use it)."""
+        fallback for devices without argument info; tests use it). ``defines``: added to every
+        build (e.g. ``{"TRACE_COUNT": 1}``, the traversal work counters of kernels/traverse.h);
+        a program's own defines win."""
         self.device = device if isinstance(device, cl.Device) else select_device(device)
         self.context = cl.Context([self.device])
         props = cl.command_queue_properties.PROFILING_ENABLE if profiling else 0
@@ -152,6 +155,7 @@ class Runtime:
         layout = bvh_layout or os.environ.get("LBWATER_BVH_LAYOUT") or (
             "binary" if self.is_gpu else "wide")
         self.bvh_layout = check_bvh_layout(layout)
+        self.defines = dict(defines or {})
 
     # -- facts ------------------------------------------------------------------------------
     @property
@@ -169,7 +173,8 @@ class Runtime:
     # -- builds -----------------------------------------------------------------------------
     def program(self, source: str, defines: dict | None = None) -> cl.Program:
         """The built program for ``kernels/<source>`` with ``defines``; built once per key."""
-        defines = {"TRACE_WIDE": int(self.bvh_layout == "wide"), **(defines or {})}
+        defines = {"TRACE_WIDE": int(self.bvh_layout == "wide"), **self.defines,
+                   **(defines or {})}
         key = (source, tuple(sorted(defines.items())))
         prg = self._programs.get(key)
         if prg is not None:

@@ -14,7 +14,8 @@
    blas_nodes : every mesh's nodes in one array (instances hold their root index);
    blas_tris  : every mesh's triangles in one array, in leaf order (wide: in blocks);
    trace_stats: [0] counts traversal-stack overflows (never expected: the stack is deeper than
-                any tree the builder can make; a non-zero count means hits may be missing). */
+                any tree the builder can make; a non-zero count means hits may be missing);
+                the work counters of TRACE_COUNT builds follow (TRACE_STAT_COUNT). */
 /* TRACE_WIDE picks the BLAS layout the kernels read; the host passes it (kernels.runtime adds
    the runtime's layout to every build, raytrace.scene.Scene.trace_defines names the scene's):
    0: binary nodes (BvhNode) and leaf-ordered triangles (BvhTri), the GPU layout;
@@ -39,7 +40,29 @@
 #define SCENE_ARGS tlas_info, tlas_nodes, tlas_prims, instances, blas_nodes, blas_tris, trace_stats
 
 #define TRACE_STAT_OVERFLOW 0
-#define TRACE_STATS_LEN 4
+/* Traversal work counters, written only by TRACE_COUNT=1 builds (a debug define, traverse.h;
+   raytrace.scene.Scene.trace_counts reads them): per ray kind, TRACE_COUNT_FIELDS uint sums
+   from TRACE_STAT_COUNT, then per kind the BLAS nodes visited per instance (ids above
+   TRACE_COUNT_INST - 1 share the last slot) from TRACE_STAT_INST. */
+#define TRACE_KIND_QUERY 0     /* trace_query.cl and other callers */
+#define TRACE_KIND_PRIMARY 1   /* the renderer's depth-0 rays */
+#define TRACE_KIND_SECONDARY 2 /* its reflection and refraction rays */
+#define TRACE_KIND_SHADOW 3    /* its shadow rays */
+#define TRACE_KIND_PHOTON 4    /* the caustics' photons */
+#define TRACE_KINDS 5
+#define TRACE_CONTINUE 0x100   /* or-ed into a kind: the same ray traced on (not counted again) */
+#define TRACE_CNT_RAYS 0       /* rays */
+#define TRACE_CNT_TRAVERSALS 1 /* scene traversals (a shadow ray through water makes several) */
+#define TRACE_CNT_TLAS 2       /* TLAS nodes visited */
+#define TRACE_CNT_ENTRIES 3    /* BLAS traversals started (instances entered) */
+#define TRACE_CNT_BLAS 4       /* BLAS nodes visited */
+#define TRACE_CNT_TRIS 5       /* triangle tests (wide layout: 4 per block) */
+#define TRACE_CNT_HITS 6       /* traversals that found a hit */
+#define TRACE_COUNT_FIELDS 8
+#define TRACE_COUNT_INST 8
+#define TRACE_STAT_COUNT 4
+#define TRACE_STAT_INST (TRACE_STAT_COUNT + TRACE_KINDS * TRACE_COUNT_FIELDS)
+#define TRACE_STATS_LEN (TRACE_STAT_INST + TRACE_KINDS * TRACE_COUNT_INST)
 
 /* A ray hit, 20 bytes. t in units of the ray direction (INFINITY on a miss); barycentrics in
    Embree's convention P = (1-u-v) p0 + u p1 + v p2; prim: triangle index in the instance's mesh

@@ -66,6 +66,19 @@
 #define TRACE_INLINE inline
 #endif
 
+/* TRACE_COUNT=1 (a debug build: raytrace.scene.Scene.trace_counts, bench/trace_visits.py)
+   counts each traversal's work in private counters and adds them to trace_stats by ray kind
+   (scene.h: TRACE_STAT_COUNT) with one atomic per field when it ends; 0 (the default) compiles
+   the counting away. */
+#ifndef TRACE_COUNT
+#define TRACE_COUNT 0
+#endif
+#if TRACE_COUNT
+#define TRACE_TICK(w, field, n) ((w)[field] += (uint)(n))
+#else
+#define TRACE_TICK(w, field, n) ((void)0)
+#endif
+
 #define TRACE_STACK 64
 /* 1 + 2 gamma(3), gamma(n) = n eps / (1 - n eps), eps = 2^-24 */
 #define TRACE_BOX_GROW 1.0000003576278687f
@@ -289,7 +302,7 @@ TRACE_INLINE int trace_mask8(int8 m) {
 TRACE_INLINE bool trace_blas(__global const WideNode* restrict nodes,
                              __global const TriBlock* restrict blocks, int root, const TraceRay* r,
                              float tmin, float* tmax, Hit* hit, int inst, bool any,
-                             __global int* restrict trace_stats) {
+                             __global int* restrict trace_stats, uint* work) {
     /* the near and far plane of each axis for this ray's direction signs */
     int nx = r->idir.x >= 0.0f ? 0 : 3, ny = r->idir.y >= 0.0f ? 1 : 4,
         nz = r->idir.z >= 0.0f ? 2 : 5;
@@ -302,6 +315,7 @@ TRACE_INLINE bool trace_blas(__global const WideNode* restrict nodes,
     bool found = false;
     for (;;) {
         __global const WideNode* n = nodes + node;
+        TRACE_TICK(work, TRACE_CNT_BLAS, 1);
         float8 tnx = (n->plane[nx] - ox) * ix, tny = (n->plane[ny] - oy) * iy,
                tnz = (n->plane[nz] - oz) * iz;
         float8 tfx = (n->plane[fx] - ox) * ix, tfy = (n->plane[fy] - oy) * iy,
@@ -334,6 +348,7 @@ TRACE_INLINE bool trace_blas(__global const WideNode* restrict nodes,
                     int k = trace_lowest_bit(leaves);
                     leaves &= leaves - 1;
                     int last = ref.a[k] + (c.a[k] + WIDE_BLOCK - 1) / WIDE_BLOCK;
+                    TRACE_TICK(work, TRACE_CNT_TRIS, WIDE_BLOCK * (last - ref.a[k]));
                     for (int bk = ref.a[k]; bk < last; ++bk) {
                         if (trace_block(blocks + bk, r, tmin, tmax, hit, inst)) {
                             found = true;
@@ -391,12 +406,13 @@ TRACE_INLINE bool trace_blas(__global const WideNode* restrict nodes,
 TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
                              __global const BvhTri* restrict tris, int root, const TraceRay* r,
                              float tmin, float* tmax, Hit* hit, int inst, bool any,
-                             __global int* restrict trace_stats) {
+                             __global int* restrict trace_stats, uint* work) {
     int stack[TRACE_STACK];
     int sp = 0, node = root;
     bool found = false;
     for (;;) {
         __global const BvhNode* n = nodes + node;
+        TRACE_TICK(work, TRACE_CNT_BLAS, 1);
         float4 a = n->lo_l, b = n->hi_l, c = n->lo_r, d = n->hi_r;
         int cl = as_int(b.w), cr = as_int(d.w);
         int rl = as_int(a.w), rr = as_int(c.w);
@@ -410,6 +426,7 @@ TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
             int cnt = side ? cr : cl, first = side ? rr : rl;
             float te = side ? tr : tl;
             if (cnt > 0 && te < INFINITY) {
+                TRACE_TICK(work, TRACE_CNT_TRIS, cnt);
                 for (int k = first; k < first + cnt; ++k) {
                     float t, u, v;
                     BvhTri tri = tris[k];
@@ -435,9 +452,11 @@ TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
 }
 #endif
 
-/* The whole scene: the TLAS over instances, each instance's BLAS in its object space. */
-TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
-                              bool any, Hit* hit) {
+/* The whole scene: the TLAS over instances, each instance's BLAS in its object space; only
+   instances whose visibility mask shares a bit with `mask`. `work`: the counters of a
+   TRACE_COUNT build (unused otherwise). */
+TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
+                                   bool any, uint mask, Hit* hit, uint* work, uint* inst_work) {
     hit->t = INFINITY;
     hit->u = 0.0f;
     hit->v = 0.0f;
@@ -453,6 +472,7 @@ TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, 
     bool found = false;
     for (;;) {
         __global const BvhNode* n = tlas_nodes + node;
+        TRACE_TICK(work, TRACE_CNT_TLAS, 1);
         float4 a = n->lo_l, b = n->hi_l, c = n->lo_r, d = n->hi_r;
         int cl = as_int(b.w), cr = as_int(d.w);
         int rl = as_int(a.w), rr = as_int(c.w);
@@ -466,15 +486,23 @@ TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, 
                     int id = tlas_prims[k];
                     __global const Instance* ins = instances + id;
                     int broot = ins->blas_root;
-                    if (broot < 0) continue;
+                    if (broot < 0 || !(ins->mask & mask)) continue;
                     float4 m0 = ins->object_from_world[0], m1 = ins->object_from_world[1],
                            m2 = ins->object_from_world[2];
                     float3 o = (float3)(dot(m0.xyz, org) + m0.w, dot(m1.xyz, org) + m1.w,
                                         dot(m2.xyz, org) + m2.w);
                     float3 dd = (float3)(dot(m0.xyz, dir), dot(m1.xyz, dir), dot(m2.xyz, dir));
                     TraceRay lr = trace_ray_setup(o, dd);
-                    if (trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, &tbest, hit, id, any,
-                                   trace_stats)) {
+                    TRACE_TICK(work, TRACE_CNT_ENTRIES, 1);
+#if TRACE_COUNT
+                    uint before = work[TRACE_CNT_BLAS];
+#endif
+                    bool got = trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, &tbest, hit,
+                                          id, any, trace_stats, work);
+#if TRACE_COUNT
+                    inst_work[min(id, TRACE_COUNT_INST - 1)] += work[TRACE_CNT_BLAS] - before;
+#endif
+                    if (got) {
                         found = true;
                         if (any) return true;
                     }
@@ -487,23 +515,61 @@ TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, 
     return found;
 }
 
-/* Closest hit in [tmin, tmax): prim/inst -1 and t INFINITY on a miss. */
-TRACE_INLINE Hit scene_closest_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
+/* trace_scene_walk, its work added to kind's counters in a TRACE_COUNT build. */
+TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
+                              bool any, uint mask, Hit* hit, int kind) {
+#if TRACE_COUNT
+    uint work[TRACE_COUNT_FIELDS], inst_work[TRACE_COUNT_INST];
+    for (int f = 0; f < TRACE_COUNT_FIELDS; ++f) work[f] = 0;
+    for (int f = 0; f < TRACE_COUNT_INST; ++f) inst_work[f] = 0;
+    bool found =
+        trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, work, inst_work);
+    work[TRACE_CNT_RAYS] = (kind & TRACE_CONTINUE) ? 0u : 1u;
+    work[TRACE_CNT_TRAVERSALS] = 1u;
+    work[TRACE_CNT_HITS] = found ? 1u : 0u;
+    int k = clamp(kind & 0xff, 0, TRACE_KINDS - 1);
+    __global uint* c = (__global uint*)trace_stats + TRACE_STAT_COUNT + k * TRACE_COUNT_FIELDS;
+    for (int f = 0; f < TRACE_COUNT_FIELDS; ++f)
+        if (work[f]) atomic_add(c + f, work[f]);
+    __global uint* ci = (__global uint*)trace_stats + TRACE_STAT_INST + k * TRACE_COUNT_INST;
+    for (int f = 0; f < TRACE_COUNT_INST; ++f)
+        if (inst_work[f]) atomic_add(ci + f, inst_work[f]);
+    return found;
+#else
+    return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, 0, 0);
+#endif
+}
+
+/* Closest hit in [tmin, tmax) among the instances whose mask shares a bit with `mask`: prim
+   and inst -1, t INFINITY on a miss. `kind` (scene.h: TRACE_KIND_*, optionally | TRACE_CONTINUE)
+   names the ray for the TRACE_COUNT counters. */
+TRACE_INLINE Hit scene_closest_hit_masked(SCENE_PARAMS, float3 org, float3 dir, float tmin,
+                                          float tmax, uint mask, int kind) {
     Hit h;
-    trace_scene(SCENE_ARGS, org, dir, tmin, tmax, false, &h);
+    trace_scene(SCENE_ARGS, org, dir, tmin, tmax, false, mask, &h, kind);
     return h;
 }
 
-/* Is anything hit in [tmin, tmax)? (shadow rays) */
-TRACE_INLINE bool scene_any_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
+/* Is any of those instances hit in [tmin, tmax)? (shadow rays; ends at the first hit found) */
+TRACE_INLINE bool scene_any_hit_masked(SCENE_PARAMS, float3 org, float3 dir, float tmin,
+                                       float tmax, uint mask, int kind) {
     Hit h;
-    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, &h);
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, mask, &h, kind);
+}
+
+/* The same over every instance. */
+TRACE_INLINE Hit scene_closest_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
+    return scene_closest_hit_masked(SCENE_ARGS, org, dir, tmin, tmax, ~0u, TRACE_KIND_QUERY);
+}
+
+TRACE_INLINE bool scene_any_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax) {
+    return scene_any_hit_masked(SCENE_ARGS, org, dir, tmin, tmax, ~0u, TRACE_KIND_QUERY);
 }
 
 /* Any hit, and which one was found first (not necessarily the closest). */
 TRACE_INLINE bool scene_any_hit_record(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
                                        Hit* h) {
-    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, h);
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, ~0u, h, TRACE_KIND_QUERY);
 }
 
 #endif

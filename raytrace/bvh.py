@@ -30,7 +30,7 @@ INFO_DTYPE = np.dtype([("root", np.int32), ("n_prims", np.int32), ("n_bad", np.i
                        ("cmin", (np.int32, 4)), ("cmax", (np.int32, 4)),
                        ("n_bad_pending", np.int32), ("pad", np.int32, 3)])
 INSTANCE_DTYPE = np.dtype([("object_from_world", (np.float32, (3, 4))), ("blas_root", np.int32),
-                           ("mesh", np.int32), ("prim_base", np.int32), ("pad", np.int32)])
+                           ("mesh", np.int32), ("prim_base", np.int32), ("mask", np.uint32)])
 HIT_DTYPE = np.dtype([("t", np.float32), ("u", np.float32), ("v", np.float32),
                       ("prim", np.int32), ("inst", np.int32)])
 

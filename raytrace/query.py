@@ -13,7 +13,7 @@ import pyopencl as cl
 
 from kernels.runtime import Runtime, get_runtime
 from raytrace.bvh import HIT_DTYPE
-from raytrace.scene import Scene
+from raytrace.scene import MASK_ALL, Scene
 
 
 def pack_rays(origins, directions, tmin=0.0, tmax=np.inf) -> tuple[np.ndarray, np.ndarray]:
@@ -53,14 +53,18 @@ class RayQuery:
     """Closest-hit or any-hit queries of device rays against a scene (kernels bound once)."""
 
     def __init__(self, scene: Scene, org: cl.Buffer, dirs: cl.Buffer, hits: cl.Buffer, n: int,
-                 *, any_hit: bool = False, stage: str = "trace", defines: dict | None = None):
+                 *, any_hit: bool = False, stage: str = "trace", defines: dict | None = None,
+                 mask: int = MASK_ALL):
         """``defines``: extra build defines of ``trace_query.cl`` (e.g. ``{"TRACE_CPU": 0}``
-        to time the GPU flavour of the traversal on a CPU; see kernels/traverse.h)."""
+        to time the GPU flavour of the traversal on a CPU; see kernels/traverse.h). ``mask``:
+        the rays see the instances whose visibility mask shares a bit with it
+        (Scene.set_instance_mask)."""
         self.rt, self.n, self.stage = scene.rt, int(n), stage
         name = "trace_any" if any_hit else "trace_closest"
         defines = {**scene.trace_defines, **(defines or {})}
         self._k = scene.rt.kernel_launcher("trace_query.cl", name, stage=stage, defines=defines)
-        self._k.bind(**scene.trace_bindings(), n=self.n, org=org, dir=dirs, hits=hits)
+        self._k.bind(**scene.trace_bindings(), n=self.n, org=org, dir=dirs, hits=hits,
+                     mask=int(mask))
         # kernel arguments hold no references: keep the buffers alive as long as the query
         self._scene, self.org, self.dirs, self.hits = scene, org, dirs, hits
 

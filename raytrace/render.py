@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pyopencl as cl
@@ -208,6 +209,7 @@ class Renderer:
         self._params_key = self._params_rec = None
         ls = s.local_size
 
+        self._stage_per_depth = False  # set_stage_per_depth: stages named per depth level
         self._last_hint: tuple | None = None  # rays per depth of the last frame that arrived
         self._sizes: dict = {}
 
@@ -255,23 +257,34 @@ class Renderer:
             self._sizes[key] = sizes
         return sizes
 
+    def set_stage_per_depth(self, on: bool = True) -> None:
+        """Time each depth level's trace, shade, shadow, scan and gather under its own stage
+        (``render.shadow.d3``), e.g. to see the tail levels of few rays (bench frame
+        --per-depth); off: one stage per kind over all levels."""
+        self._stage_per_depth = bool(on)
+        for d, ks in enumerate(self._k):
+            for k in ks.values():
+                k.stage = self._stage_name(re.sub(r"\.d\d+$", "", k.stage), d)
+
+    def _stage_name(self, stage: str, depth: int) -> str:
+        return f"{stage}.d{depth}" if self._stage_per_depth else stage
+
     def _depth_kernels(self, depth: int) -> dict:
         rt = self.rt
         while len(self._k) <= depth:
             d = len(self._k)
             trace = "render.trace_secondary" if d else "render.trace"
+
+            def launcher(source, name, stage, d=d):
+                return rt.kernel_launcher(source, name, stage=self._stage_name(stage, d))
+
             self._k.append({
-                "trace": rt.kernel_launcher("render_trace.cl", "render_trace", stage=trace),
-                "trace_shade": rt.kernel_launcher("render_trace.cl", "render_trace_shade",
-                                                  stage=trace),
-                "shade": rt.kernel_launcher("render_shade.cl", "render_shade",
-                                            stage="render.shade"),
-                "shadow": rt.kernel_launcher("render_shade.cl", "render_shadow",
-                                             stage="render.shadow"),
-                "scan": rt.kernel_launcher("render_secondary.cl", "render_scan",
-                                           stage="render.secondary"),
-                "gather": rt.kernel_launcher("render_frame.cl", "render_gather",
-                                             stage="render.gather")})
+                "trace": launcher("render_trace.cl", "render_trace", trace),
+                "trace_shade": launcher("render_trace.cl", "render_trace_shade", trace),
+                "shade": launcher("render_shade.cl", "render_shade", "render.shade"),
+                "shadow": launcher("render_shade.cl", "render_shadow", "render.shadow"),
+                "scan": launcher("render_secondary.cl", "render_scan", "render.secondary"),
+                "gather": launcher("render_frame.cl", "render_gather", "render.gather")})
             self._bound_sig = None
         return self._k[depth]
 

@@ -291,7 +291,8 @@ def _edge_distance(u, v):
 
 # ---- the pipeline -------------------------------------------------------------------------------
 def render(tables: dict, cam, prm, lights) -> dict:
-    """Linear framebuffer (H, W, 3), RGBA8 image, primary AOVs and a per-pixel 'fragile' flag.
+    """Linear framebuffer (H, W, 3), RGBA8 image, primary AOVs, a per-pixel 'fragile' flag and
+    the number of shadow rays traced (``shadow_rays``).
 
     A pixel is fragile when one of its rays hits within 1e-4 (barycentric) of a triangle edge or
     within 1e-6 of the total-internal-reflection or cut-off thresholds, where float32 and float64
@@ -311,6 +312,7 @@ def render(tables: dict, cam, prm, lights) -> dict:
     max_depth = int(prm["max_depth"])
     min_w = float(prm["min_weight"])
     mode = int(prm["fresnel"])
+    shadow_rays = 0
     for depth in range(max_depth + 1):
         if len(o) == 0:
             break
@@ -353,8 +355,12 @@ def render(tables: dict, cam, prm, lights) -> dict:
                 if nfs @ d[i] >= 0:
                     nfs = nfg
                 Lk = wk * dfrac * prm["ambient"][:3] * kd[k]
-                Lk = Lk + wk * dfrac * _direct(world, mats, lights, prm, p[k], nfg, nfs, d[i],
-                                               kd[k], m, medium[i])
+                direct, near_cut, n_sh = _direct(world, mats, lights, prm, p[k], nfg, nfs,
+                                                 d[i], kd[k], m, medium[i], wk * dfrac, min_w)
+                shadow_rays += n_sh
+                Lk = Lk + wk * dfrac * direct
+                if near_cut:
+                    fragile[pix[i, 1], pix[i, 0]] = True
                 L[i] = Lk
                 if depth >= max_depth:
                     continue
@@ -376,7 +382,7 @@ def render(tables: dict, cam, prm, lights) -> dict:
                 else:
                     w_refl, w_refr, refr_med = wk * float(m["reflectivity"]), np.zeros(3), -1
                 for wc in (w_refl, w_refr):
-                    if abs(wc.max() - min_w) < 1e-6 * max(min_w, 1e-30):
+                    if min_w > 0 and abs(wc.max() - min_w) < 1e-6 * min_w:
                         fragile[pix[i, 1], pix[i, 0]] = True
                 if w_refl.max() > 0 and w_refl.max() >= min_w:
                     rd = reflect(d[i], nfs)
@@ -401,11 +407,16 @@ def render(tables: dict, cam, prm, lights) -> dict:
         pix = np.array([c[0] for c in child_pix])
         samples = np.array([c[1] for c in child_pix])
     return {"framebuffer": fb, "rgba": to_rgba8(fb, prm), "fragile": fragile,
-            "depth": aov_depth, "prim": aov_prim, "inst": aov_inst}
+            "depth": aov_depth, "prim": aov_prim, "inst": aov_inst, "shadow_rays": shadow_rays}
 
 
-def _direct(world, mats, lights, prm, p, nfg, nfs, d, kd, m, medium):
+def _direct(world, mats, lights, prm, p, nfg, nfs, d, kd, m, medium, w, min_w):
+    """Direct light at a hit, whether a light's share came within rounding of the cut-off
+    (below ``min_w`` of the pixel, a light is added unshadowed, with no shadow ray), and the
+    number of shadow rays traced."""
     total = np.zeros(3)
+    near_cut = False
+    n_rays = 0
     org = p + EPS * (1 + np.abs(p).max()) * nfg
     for li in lights[: int(prm["n_lights"])]:
         if LightKind(int(li["kind"])) == LightKind.SPOT:
@@ -423,14 +434,22 @@ def _direct(world, mats, lights, prm, p, nfg, nfs, d, kd, m, medium):
         ndl = nfs @ ldir
         if ndl <= 0 or nfg @ ldir <= 0 or E.max() <= 0:
             continue
-        T = _transmittance(world, mats, prm, org, ldir, dist, medium)
-        if T.max() <= 0:
-            continue
         rv = max(reflect(-ldir, nfs) @ (-d), 0.0)
         shin = float(m["specular"][3])
         spec = rv**shin if shin > 0 else 1.0
-        total += T * E * (kd * ndl + m["specular"][:3] * spec)
-    return total
+        brdf = kd * ndl + m["specular"][:3] * spec
+        share = float((w * E * brdf).max())
+        if min_w > 0 and abs(share - min_w) < 1e-3 * min_w:
+            near_cut = True
+        if share < min_w:
+            total += E * brdf
+            continue
+        n_rays += 1
+        T = _transmittance(world, mats, prm, org, ldir, dist, medium)
+        if T.max() <= 0:
+            continue
+        total += T * E * brdf
+    return total, near_cut, n_rays
 
 
 def _transmittance(world, mats, prm, org, ldir, tmax, medium):

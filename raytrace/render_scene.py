@@ -23,6 +23,8 @@ from kernels.runtime import Runtime
 from raytrace.render_types import (
     INSTANCEINFO,
     LIGHT,
+    MASK_OPAQUE,
+    MASK_TRANSMISSIVE,
     MATERIAL,
     MAX_LIGHTS,
     MESH_DYNAMIC,
@@ -454,6 +456,23 @@ class RenderScene:
                                                          is_blocking=False))
         self._dirty.clear()
 
+    def instance_materials(self, instance_id: int) -> set:
+        """The material ids an instance's triangles can have."""
+        rec = self.instances[int(instance_id)]
+        if int(rec["material"]) >= 0:
+            return {int(rec["material"])}
+        m = self.meshes[int(rec["mesh"])]
+        if m["tri_materials"] is not None:
+            return {int(x) for x in np.unique(m["tri_materials"])}
+        return {int(m["material"])}
+
+    def _set_masks(self) -> None:
+        """Each instance's visibility bit: MASK_OPAQUE when every material it can show is
+        opaque, else MASK_TRANSMISSIVE (render_shade.cl's shadow rays trace them apart)."""
+        for i in range(len(self.instances)):
+            diel = any(self.materials[k].ior > 0 for k in self.instance_materials(i))
+            self.scene.set_instance_mask(i, MASK_TRANSMISSIVE if diel else MASK_OPAQUE)
+
     def update(self, rebuild: bool = False) -> None:
         """Bring BVHs and shading tables up to date (enqueued; no host sync)."""
         if not self.materials:
@@ -461,6 +480,8 @@ class RenderScene:
         if len(self.meshes) != self._layout_meshes:
             self._build_layout()
         self._copy_dynamic()
+        if self._dirty & {"instances", "materials"}:
+            self._set_masks()
         self._upload_tables()
         self.scene.update(rebuild=rebuild)
 

@@ -111,6 +111,9 @@ RAYGEN_PARAMS = np.dtype([("q0", np.uint32), ("n_rays", np.uint32), ("zero_stats
 GATHER_PARAMS = np.dtype([("scatter", np.uint32), ("q0", np.uint32), ("n_q", np.uint32),
                           ("finish", np.uint32)])
 
+#: Instance visibility bits (kernels/render_types.h): all opaque, or holding a dielectric.
+MASK_OPAQUE = 1
+MASK_TRANSMISSIVE = 2
 MESH_HAS_NORMALS = 1
 MESH_HAS_UVS = 2
 MESH_TRI_MATERIALS = 4

@@ -36,8 +36,17 @@ from raytrace.sort import make_sorter
 TRANSFORM_DTYPE = np.dtype([("r0", np.float32, 4), ("r1", np.float32, 4),
                             ("r2", np.float32, 4)])
 TLAS_LEAF_SIZE = 1
-TRACE_STATS_LEN = 4
+#: An instance's default visibility mask (kernels/bvh.h Instance.mask): every ray sees it.
+MASK_ALL = 0xFFFFFFFF
 TRACE_STAT_OVERFLOW = 0
+#: The traversal work counters of TRACE_COUNT builds (kernels/scene.h): ray kinds and fields.
+TRACE_KINDS = ("query", "primary", "secondary", "shadow", "photon")
+TRACE_COUNT_FIELDS = ("rays", "traversals", "tlas_nodes", "blas_entries", "blas_nodes",
+                      "tri_tests", "hits", "spare")
+TRACE_COUNT_INST = 8
+TRACE_STAT_COUNT = 4
+TRACE_STAT_INST = TRACE_STAT_COUNT + len(TRACE_KINDS) * len(TRACE_COUNT_FIELDS)
+TRACE_STATS_LEN = TRACE_STAT_INST + len(TRACE_KINDS) * TRACE_COUNT_INST
 BOUNDS_WG = 256
 
 
@@ -106,6 +115,8 @@ class Scene:
         self.rt, self.leaf_size, self.stage = rt, int(leaf_size), stage
         self.meshes: list[MeshRecord] = []
         self._inst_mesh: list[int] = []
+        self._inst_masks: list[int] = []   #: visibility bits per instance (set_instance_mask)
+        self._masks_dirty = False
         self._xforms = np.zeros((0, 3, 4), np.float32)  # the rows the host last wrote
         self.transform_buffer = rt.buffer(TRANSFORM_DTYPE.itemsize)
         self._xform_capacity = 0
@@ -170,6 +181,7 @@ class Scene:
                             f"instance {len(self._inst_mesh)}")
         inst = len(self._inst_mesh)
         self._inst_mesh.append(int(mesh_id))
+        self._inst_masks.append(MASK_ALL)
         self._xforms = np.concatenate([self._xforms, rows[None]])
         if inst >= self._xform_capacity:
             self._grow_transforms(max(4, 2 * self._xform_capacity))
@@ -190,6 +202,22 @@ class Scene:
             return
         self._xforms[i] = rows
         self._write_row(i, rows)
+
+    def set_instance_mask(self, instance_id: int, mask: int) -> None:
+        """Visibility bits of an instance (default :data:`MASK_ALL`): a ray traced with a mask
+        (kernels/traverse.h, ``scene_*_masked``) sees it only when the two share a bit; the
+        unmasked queries see every instance. Takes effect at the next :meth:`update`."""
+        i = int(instance_id)
+        if not 0 <= i < len(self._inst_mesh):
+            raise ValueError(f"instance id {instance_id} out of range [0, {len(self._inst_mesh)})")
+        if not 0 <= int(mask) <= MASK_ALL:
+            raise ValueError(f"instance mask must lie in [0, 2^32), got {mask}")
+        if self._inst_masks[i] != int(mask):
+            self._inst_masks[i] = int(mask)
+            self._masks_dirty = True
+
+    def instance_mask(self, instance_id: int) -> int:
+        return self._inst_masks[int(instance_id)]
 
     def transform_row(self, instance_id: int) -> int:
         """The row of :attr:`transform_buffer` holding instance ``instance_id``'s
@@ -323,6 +351,8 @@ class Scene:
         self.normal_buffer = rt.buffer(TRANSFORM_DTYPE.itemsize * n)
         self._tlas_boxes = rt.buffer(32 * n)
         self._inst_mesh_dev = rt.to_device(np.array(self._inst_mesh, np.int32))
+        self._inst_mask_dev = rt.to_device(np.array(self._inst_masks, np.uint32))
+        self._masks_dirty = False
         st = f"{self.stage}.tlas"
 
         def kernel(name, stage):
@@ -331,7 +361,8 @@ class Scene:
         self._prep = kernel("tlas_prep", "prep").bind(
             n_inst=n, xforms=self.transform_buffer, inst_mesh=self._inst_mesh_dev,
             mesh_prim_base=self.mesh_prim_base, blas_infos=self.blas_infos,
-            mesh_wide_root=self.mesh_wide_root, wide=int(self.wide), instances=self.instances,
+            mesh_wide_root=self.mesh_wide_root, wide=int(self.wide),
+            inst_mask=self._inst_mask_dev, instances=self.instances,
             normals=self.normal_buffer, boxes=self._tlas_boxes, tlas_info=self.tlas_info)
         self._prep.set_size(n, BOUNDS_WG)
         self._morton = kernel("bvh_box_morton", "morton").bind(
@@ -353,10 +384,37 @@ class Scene:
             return
         if n != self._tlas_n:
             self._allocate_tlas(n)
+        if self._masks_dirty:
+            cl.enqueue_copy(self.rt.queue, self._inst_mask_dev,
+                            np.array(self._inst_masks, np.uint32), is_blocking=False)
+            self._masks_dirty = False
         self._prep()
         self._morton()
         self._tlas_sorter.enqueue()
         self._hier()
+
+    # -- traversal work (TRACE_COUNT builds) ------------------------------------------------
+    def reset_trace_counts(self) -> None:
+        """Zero the work counters (the overflow guard stays)."""
+        n = TRACE_STATS_LEN - TRACE_STAT_COUNT
+        cl.enqueue_fill_buffer(self.rt.queue, self.trace_stats, np.uint32(0),
+                               4 * TRACE_STAT_COUNT, 4 * n)
+
+    def trace_counts(self) -> dict:
+        """The work counters since the last reset, per ray kind: ``{kind: {field: n}}`` with
+        the fields of :data:`TRACE_COUNT_FIELDS` and ``blas_nodes_by_instance`` (a list; ids
+        past the last slot share it). All zero unless the kernels were built with
+        ``TRACE_COUNT=1`` (``Runtime(defines={"TRACE_COUNT": 1})``). Synchronises."""
+        st = self.rt.to_host(self.trace_stats, np.uint32, TRACE_STATS_LEN)
+        nf = len(TRACE_COUNT_FIELDS)
+        out = {}
+        for k, kind in enumerate(TRACE_KINDS):
+            base = TRACE_STAT_COUNT + k * nf
+            rec = {f: int(st[base + i]) for i, f in enumerate(TRACE_COUNT_FIELDS)}
+            ib = TRACE_STAT_INST + k * TRACE_COUNT_INST
+            rec["blas_nodes_by_instance"] = [int(x) for x in st[ib:ib + TRACE_COUNT_INST]]
+            out[kind] = rec
+        return out
 
     # -- kernels' view ----------------------------------------------------------------------
     def trace_args(self) -> list:

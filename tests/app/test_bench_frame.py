@@ -34,3 +34,16 @@ def test_bench_frame_photons_sets_the_caustic_photons_and_times_them(tmp_path, c
     assert r["caustic_photons"] == 1024 and r["caustics.photons_ms"] > 0
     assert main(["bench", "frame", "--photons", "0", "--out", str(out)]) == 2
     assert "--photons 0 is out of range" in capsys.readouterr().err
+
+
+def test_bench_frame_per_depth_stages(tmp_path):
+    out = tmp_path / "res"
+    assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
+                 "--warmup", "1", "--frame-time", "0.1", "--caustics", "off", "--per-depth",
+                 "--out", str(out)]) == 0
+    r = json.loads((out / "bench_frame.json").read_text())[0]
+    depths = [int(n) for n in r["rays_per_depth"].split()]
+    assert depths[0] == 48 * 32 and len(depths) == 6  # the pool's 5 bounces
+    assert r["render.trace.d0_ms"] > 0 and r["render.shadow.d0_ms"] > 0
+    assert r["render.trace_secondary.d1_ms"] > 0 and r["render.shadow.d5_ms"] >= 0
+    assert "render.shadow_ms" not in r and "render.trace_ms" not in r

@@ -1,0 +1,73 @@
+"""Shadow rays: a light whose share of the pixel is below min_weight is added unshadowed with no
+shadow ray (the water's sharp highlight away from the sun's mirror direction); checked against
+the float64 pipeline, image and shadow-ray count, with the counters of a TRACE_COUNT build."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from kernels.runtime import Runtime
+from raytrace import render_reference as ref
+from raytrace.render import Renderer, RenderSettings
+from raytrace.render_scene import Material, RenderScene
+from tests.raytrace.test_render import box, quad
+
+
+@pytest.fixture(scope="module")
+def rt_count(rt):
+    return Runtime(rt.device, defines={"TRACE_COUNT": 1})
+
+
+def pond(rt):
+    """Flat water over a tiled floor, an opaque slab above the water shadowing part of it, the
+    sun in the camera's mirror direction (its highlight in view)."""
+    sc = RenderScene(rt)
+    floor = sc.add_material(Material(diffuse=(0.8, 0.75, 0.7), specular=(0.1, 0.1, 0.1)))
+    water = sc.add_material(Material(diffuse=(0, 0, 0), specular=(1, 1, 1), shininess=400,
+                                     ior=1.333, absorption=(0.45, 0.09, 0.06)))
+    slab = sc.add_material(Material(diffuse=(0.5, 0.3, 0.2)))
+    V, F = quad((0, -0.4, 0), 4)
+    sc.add_instance(sc.add_mesh(V, F, material=floor))
+    V, F = quad((0, 0, 0), 4)
+    sc.add_instance(sc.add_mesh(V, F, material=water))
+    V, F = box((-0.2, 0.3, -0.9), (1.2, 0.35, 0.1))
+    sc.add_instance(sc.add_mesh(V, F, material=slab))
+    sc.add_light("directional", direction=(0.0, -0.6, 0.8), color=(2.0, 1.9, 1.8))
+    return sc
+
+
+def render(rt, settings):
+    sc = pond(rt)
+    r = Renderer(rt, sc, settings)
+    r.set_camera((0, 1.5, 2.0), (0, 0, 0), (0, 1, 0), 60)
+    sc.scene.update()
+    sc.scene.reset_trace_counts()
+    r.render()
+    return sc, r
+
+
+def check(rt, settings):
+    """Render, compare image and shadow-ray count with the float64 pipeline; its output."""
+    sc, r = render(rt, settings)
+    fb = r.read_framebuffer()
+    counts = sc.scene.trace_counts()["shadow"]
+    out = ref.render(sc.tables(), r.camera, r.params(), sc.lights)
+    ok = ~out["fragile"]
+    assert ok.mean() > 0.95
+    err = np.abs(fb - out["framebuffer"]).max(axis=2)
+    assert np.all(err[ok] <= 2e-4 * np.maximum(1.0, out["framebuffer"].max(axis=2))[ok])
+    # the kernels traced the shadow rays the reference traced (up to the fragile pixels)
+    assert abs(counts["rays"] - out["shadow_rays"]) <= (~ok).sum()
+    return out, float(r.params()["min_weight"])
+
+
+def test_faint_light_needs_no_shadow_ray(rt_count):
+    s = RenderSettings(width=27, height=19, bounces=1)
+    cut, min_weight = check(rt_count, s)
+    # without the cut-off every lit hit traces a shadow ray: far more, and the image differs
+    # by at most the cut-off where the faint light was occluded
+    full, _ = check(rt_count, dataclasses.replace(s, min_weight=0.0))
+    assert cut["shadow_rays"] < 0.7 * full["shadow_rays"]
+    diff = np.abs(cut["framebuffer"] - full["framebuffer"]).max(axis=2)
+    assert 0 < diff.max() <= 2 * min_weight
