@@ -9,3 +9,9 @@ lb() { python3 -m app.cli "$@"; }
 lb bench capture --cells 1024 --size 1920 1080 --frames 120 --out "$out/capture1080" | tail -1
 lb capture scenes/timeline.toml -o "$out/caustics_clip.mp4" --width 960 --height 540 --fps 30 \
     --seconds 6 --spp 4 --force 2>&1 | tail -1
+# the LBM step against the copy bandwidth (the exact-volume quantum's cost), and the long runs
+lb bench lbm --sizes 2048,4096 --out "$out/lbm" 2>&1 | tail -2
+python3 bench/long_runs.py volume --steps 100000 --out "$out/long_slip" 2>&1 | tail -1
+python3 bench/long_runs.py volume --steps 100000 --boundary noslip --out "$out/long_noslip" 2>&1 | tail -1
+python3 bench/long_runs.py volume --cells 1024 768 --steps 100000 --check-every 20000 --out "$out/long_big" 2>&1 | tail -1
+timeout 200 python3 bench/long_runs.py frames --frames 10000 --out "$out/long_frames" 2>&1 | tail -1

@@ -11,7 +11,7 @@ old=${2:-}
 mkdir -p "$out"
 lb() { python3 -m app.cli "$@"; }
 # correctness first: kernels, BVH, renderer, solver, bodies and the frame pipeline on this device
-timeout 300 python3 -m pytest -q -x -p no:cacheprovider tests/kernels tests/raytrace/test_render.py \
+timeout 200 python3 -m pytest -q -x -p no:cacheprovider tests/kernels tests/raytrace/test_render.py \
     tests/raytrace/test_caustics.py tests/lbm/test_bodies.py tests/lbm/test_bodies_fast.py tests/app/test_frame_pipeline.py \
     2>&1 | tail -3
 f="--cells 1024 --size 1920 1080 --frames 40"
@@ -21,6 +21,8 @@ for rep in 1 2; do
         (cd "$old" && python3 -m app.cli bench frame $f --out "$out/before$rep" | tail -1)
     fi
     lb bench frame $f --out "$out/after$rep" | tail -1
+    # the same scene as before (static boat, no caustics) on this build
+    [ -n "$old" ] && lb bench frame $f --scene "$old/scenes/pool.toml" --out "$out/afterold$rep" | tail -1
 done
 lb bench frame $f --caustics off --out "$out/nocaustics" | tail -1
 lb bench frame $f --boats 0 --caustics off --out "$out/noboats" | tail -1
@@ -31,6 +33,5 @@ for n in 65536 131072 262144; do
 done
 lb bench frame --cells 1024 --size 3840 2160 --frames 20 --out "$out/frame4k" | tail -1
 lb bench window --out "$out/window" 2>&1 | tail -3
-python3 bench/long_runs.py volume --steps 100000 --out "$out/long" 2>&1 | tail -1
-python3 bench/long_runs.py volume --steps 100000 --boundary noslip --out "$out/longns" 2>&1 | tail -1
-timeout 240 python3 bench/long_runs.py frames --frames 10000 --out "$out/long" 2>&1 | tail -1
+lb bench frame $f --caustics off --per-depth --out "$out/perdepth" | tail -1
+exit 0
