@@ -209,7 +209,7 @@ SHADING_SCHEMA = {
     "caustics": Field("str", "off", choices=("off", "traced", "projected"),
                       doc="sunlight through the water onto the pool: off (shadow rays through "
                           "the water), traced (photons); projected is not implemented"),
-    "caustic_photons": Field("int", 262144, lo=1, hi=2**26,
+    "caustic_photons": Field("int", 131072, lo=1, hi=2**26,
                              doc="photons per frame per directional light, over the water"),
     "caustic_resolution": Field("int", 256, lo=2, hi=8192,
                                 doc="caustic map texels along the pool floor's longer side"),
@@ -321,7 +321,7 @@ class ShadingSpec:
     ambient: tuple
     seed: int
     caustics: str = "off"
-    caustic_photons: int = 262144
+    caustic_photons: int = 131072
     caustic_resolution: int = 256
     caustic_filter: int = 1
     caustic_blend: float = 0.5

@@ -65,7 +65,7 @@ class CausticSettings:
     """``[shading] caustics*`` of a scene."""
 
     mode: str = "off"        #: off | traced | projected (not implemented)
-    photons: int = 262144    #: photons per frame per directional light (a grid over the water)
+    photons: int = 131072    #: photons per frame per directional light (a grid over the water)
     resolution: int = 256    #: texels along the pool floor's longer side (square-ish texels)
     filter: int = 1          #: tent filter radius (texels), 0: none
     blend: float = 0.5       #: weight of last frame's map (0: none; exponential history)

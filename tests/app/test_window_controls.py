@@ -229,7 +229,7 @@ def test_steps_that_save_little_wait_until_they_matter():
     assert [r.bounces for r in rungs if r.photons == 0][0] == 2      # bounces followed
 
 
-P = 262144   # the pool scene's caustic photons
+P = 262144   # a scene's caustic photons (twice the default: dear on a CPU)
 
 
 def test_expensive_caustics_are_turned_down_then_off_before_the_picture_gets_coarse():
