@@ -253,6 +253,27 @@ def test_expensive_caustics_are_turned_down_then_off_before_the_picture_gets_coa
     assert [q.caustic_map_resolution(p, P, 256) for p in q.caustic_levels(P)] == [256, 128, 64]
 
 
+#: A probe of the pool scene on 2 quiet PoCL cores (2026-12-01; 64 cells, 320x180, 2 bounces,
+#: 65536 photons), as app.window.decide_quality measured it (display not included).
+POCL_2CORE = q.Costs(per_cell_step=1.9e-4, per_cell=1.8e-4, per_ray=1.2e-3, fixed=16.2,
+                     ray_ratio=(1.0, 0.431, 0.0035), steps_per_frame=1.0, caustics=57.7,
+                     caustic_photons=65536)
+
+
+def test_the_pool_on_two_cpu_cores_gets_20_fps_and_a_fast_device_the_full_picture():
+    pool = dict(window=(640, 360), max_cells=200, max_bounces=5, aspect=0.75, base_cells=64,
+                photons=P)
+    cpu = q.choose(POCL_2CORE, target_fps=20, **pool)
+    assert cpu.predicted_ms <= 50.0 and cpu.caustics == "off" and cpu.photons == P // 16
+    assert cpu.bounces == 5 and cpu.cells >= 64     # they cost little beside the pixels
+    # on a device 200x faster (a GPU: the H200 is hundreds of times) at 1280x720 and 60 FPS: the
+    # whole picture, the scene's grid, bounces and photons
+    fast = q.choose(POCL_2CORE.scaled(1 / 200), target_fps=60,
+                    **(pool | {"window": (1280, 720)}))
+    assert (fast.cells, fast.scale, fast.bounces, fast.caustics, fast.photons) == (
+        200, 1.0, 5, None, P) and fast.predicted_ms <= 1000 / 60
+
+
 def test_presets_turn_caustics_down_or_off():
     low, med, high = (q.preset(n, max_cells=200, max_bounces=5, photons=P)
                       for n in ("low", "medium", "high"))
