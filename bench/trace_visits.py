@@ -1,5 +1,6 @@
 """Traversal work per ray kind on a scene: rays, BVH node visits and triangle tests per ray of the
-renderer's primary, secondary and shadow rays and the caustics' photons, from the work counters
+renderer's primary, secondary and shadow rays (the any-hit query of opaque blockers, then the
+crossings of dielectrics where the scene has some) and the caustics' photons, from the counters
 of a TRACE_COUNT build (kernels/traverse.h). Runs anywhere (PoCL included: counts, not times);
 the binary BVH layout (the GPU's) by default.
 
@@ -20,7 +21,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-KINDS = ("primary", "secondary", "shadow", "photon")
+KINDS = ("primary", "secondary", "shadow", "crossing", "photon")
 
 
 def scene_variant(scene, boat: str, old_y: float):

@@ -46,7 +46,7 @@ inline float3 shadow_transmittance(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
         const Hit h = scene_closest_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax,
                                                RENDER_MASK_TRANSMISSIVE,
-                                               TRACE_KIND_SHADOW | TRACE_CONTINUE);
+                                               TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
         if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;

@@ -47,9 +47,10 @@
 #define TRACE_KIND_QUERY 0     /* trace_query.cl and other callers */
 #define TRACE_KIND_PRIMARY 1   /* the renderer's depth-0 rays */
 #define TRACE_KIND_SECONDARY 2 /* its reflection and refraction rays */
-#define TRACE_KIND_SHADOW 3    /* its shadow rays */
+#define TRACE_KIND_SHADOW 3    /* its shadow rays (the any-hit query of what blocks light) */
 #define TRACE_KIND_PHOTON 4    /* the caustics' photons */
-#define TRACE_KINDS 5
+#define TRACE_KIND_CROSSING 5  /* shadow rays on through dielectrics (render_shade.cl) */
+#define TRACE_KINDS 6
 #define TRACE_CONTINUE 0x100   /* or-ed into a kind: the same ray traced on (not counted again) */
 #define TRACE_CNT_RAYS 0       /* rays */
 #define TRACE_CNT_TRAVERSALS 1 /* scene traversals (a shadow ray through water makes several) */

@@ -40,7 +40,7 @@ TLAS_LEAF_SIZE = 1
 MASK_ALL = 0xFFFFFFFF
 TRACE_STAT_OVERFLOW = 0
 #: The traversal work counters of TRACE_COUNT builds (kernels/scene.h): ray kinds and fields.
-TRACE_KINDS = ("query", "primary", "secondary", "shadow", "photon")
+TRACE_KINDS = ("query", "primary", "secondary", "shadow", "photon", "crossing")
 TRACE_COUNT_FIELDS = ("rays", "traversals", "tlas_nodes", "blas_entries", "blas_nodes",
                       "tri_tests", "hits", "spare")
 TRACE_COUNT_INST = 8

@@ -1,6 +1,7 @@
 """Shadow rays: a light whose share of the pixel is below min_weight is added unshadowed with no
-shadow ray (the water's sharp highlight away from the sun's mirror direction); checked against
-the float64 pipeline, image and shadow-ray count, with the counters of a TRACE_COUNT build."""
+shadow ray (the water's sharp highlight away from the sun's mirror direction); the opaque
+blockers are found before the water is crossed. Checked against the float64 pipeline, image and
+shadow-ray count, with the counters of a TRACE_COUNT build."""
 
 import dataclasses
 
@@ -59,6 +60,13 @@ def check(rt, settings):
     assert np.all(err[ok] <= 2e-4 * np.maximum(1.0, out["framebuffer"].max(axis=2))[ok])
     # the kernels traced the shadow rays the reference traced (up to the fragile pixels)
     assert abs(counts["rays"] - out["shadow_rays"]) <= (~ok).sum()
+    # the any-hit query of opaque blockers never entered the water (instance 1); the rays it
+    # let through crossed the water alone, some of them (from the floor) through its surface
+    crossing = sc.scene.trace_counts()["crossing"]
+    assert counts["blas_nodes_by_instance"][1] == 0 and counts["blas_nodes"] > 0
+    assert 0 < crossing["rays"] <= counts["rays"] - counts["hits"]
+    assert crossing["blas_nodes_by_instance"][1] == crossing["blas_nodes"] > 0
+    assert crossing["hits"] > 0
     return out, float(r.params()["min_weight"])
 
 
