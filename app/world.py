@@ -143,7 +143,7 @@ class World:
         if not isinstance(scene, Scene):
             raise InputError(f"World: scene must be a scene file or app.scene.Scene, got "
                              f"{type(scene).__name__}")
-        if image not in self.IMAGES:
+        if image not in self.IMAGES:   # before any device work
             raise InputError(f"World: image {image!r} must be one of {', '.join(self.IMAGES)}")
         if not 1 <= int(frames_in_flight) <= 8:
             raise InputError(f"frames_in_flight {frames_in_flight} out of range; allowed [1, 8]")
@@ -176,23 +176,15 @@ class World:
 
         n = int(frames_in_flight)
         w, h = self.size
-        self.image = image
-        self._yuv = None                # kernels.video_yuv.YuvConverter with image="yuv420p"
-        if image == "yuv420p":
-            from kernels.video_yuv import YuvConverter
-
-            self._yuv = YuvConverter(self.rt, w, h)
-            img_ring = PinnedRing(self.rt, self._yuv.nbytes, np.uint8, (self._yuv.nbytes,),
-                                  slots=n)
-        else:
-            img_ring = PinnedRing(self.rt, 4 * w * h, np.uint8, (h, w, 4), slots=n)
-        self._rings = {"image": img_ring,
+        self.image, self._yuv = None, None   # set_image: kernels.video_yuv with yuv420p
+        self._rings = {"image": None,
                        "counts": PinnedRing(self.rt, 4 * STATS_LEN, np.uint32, (STATS_LEN,),
                                             slots=n)}
         if self.sim is not None:
             self._rings["guard"] = PinnedRing(self.rt, GUARD_DTYPE.itemsize, GUARD_DTYPE, (1,),
                                               slots=n)
         self._slots = [_Slot() for _ in range(n)]
+        self.set_image(image)
         self._free = deque(self._slots)
         self._in_flight: deque[_Slot] = deque()
         self._guard_prev = None
@@ -397,6 +389,28 @@ class World:
         if self.sim is None:
             return 0
         return int(math.floor(self._carry + seconds / self.sim.dt + 1e-9))
+
+    def set_image(self, image: str) -> None:
+        """What :meth:`read_frame` returns from the next frame on: ``"rgba"`` or ``"yuv420p"``
+        (frames in flight are completed first)."""
+        from kernels.pinned import PinnedRing
+        from kernels.video_yuv import YuvConverter
+
+        if image not in self.IMAGES:
+            raise InputError(f"World: image {image!r} must be one of {', '.join(self.IMAGES)}")
+        if image == self.image:
+            return
+        if getattr(self, "_in_flight", None):
+            self.drain()
+        w, h = self.size
+        n = len(self._slots)
+        if image == "yuv420p":
+            self._yuv = YuvConverter(self.rt, w, h)
+            ring = PinnedRing(self.rt, self._yuv.nbytes, np.uint8, (self._yuv.nbytes,), slots=n)
+        else:
+            self._yuv = None
+            ring = PinnedRing(self.rt, 4 * w * h, np.uint8, (h, w, 4), slots=n)
+        self._rings["image"], self.image = ring, image
 
     # -- the frame --------------------------------------------------------------------------
     def enqueue_frame(self, seconds: float = 0.0) -> int:
