@@ -1,7 +1,8 @@
 """Capture-overhead benchmark: in one process and on one World, the bare frame loop (what
 ``bench frame`` times: frames in flight, the next enqueued before the last image is read) against
-the real capture path (``lbwater capture``'s: the timeline's inputs, frame N+1 enqueued before
-frame N is copied and sent to the H.264 encoder, optionally a PNG per frame too), each as
+the real capture path (``lbwater capture``'s: the timeline's inputs, the yuv420p planes made on
+the device, frame N+1 enqueued before frame N is read and queued to the H.264 encoder's writer
+thread; with ``--png`` RGBA read back, converted on the host, and a PNG per frame too), each as
 wall ms per frame over ``--frames`` frames, warm-up excluded, median of ``--repeats`` runs taken
 alternately (bare, capture, bare, ...). A capture run is timed from its first frame to the
 encoder's file closed (the encoder started beforehand); its video is checked to decode with
@@ -15,6 +16,8 @@ from __future__ import annotations
 import statistics
 import time
 from pathlib import Path
+
+from app.capture import PRESET, PRESETS
 
 SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
 GOAL = 1.15
@@ -34,6 +37,8 @@ def add_arguments(p) -> None:
     p.add_argument("--fps", type=float, default=30.0,
                    help="video frame rate: 1/fps s of water per frame, both loops (default 30)")
     p.add_argument("--quality", type=float, default=8.0, help="H.264 quality 0-10 (default 8)")
+    p.add_argument("--preset", choices=PRESETS, default=PRESET,
+                   help=f"x264 speed preset (default {PRESET}, as capture's)")
     p.add_argument("--png", action="store_true",
                    help="also write every captured frame as a PNG (capture --frames-dir)")
     p.add_argument("--caustics", choices=("off", "traced"),
@@ -71,7 +76,8 @@ def _capture(world, timeline, n: int, dt: float, video_path: Path, size, args, p
     """(s per frame, s per frame in the writers) of ``n`` frames through capture's path."""
     from app import capture
 
-    video = capture.VideoWriter(video_path, size, args.fps, args.quality)   # not timed
+    video = capture.VideoWriter(video_path, size, args.fps, args.quality,
+                                preset=args.preset)   # not timed
     st = capture._Written()
     t0 = time.perf_counter()
     try:
@@ -114,7 +120,9 @@ def run(args) -> int:
             world.frame(dt)
         bare, cap, write = [], [], []
         for _ in range(args.repeats):   # alternately, so drift hits both alike
+            world.set_image("rgba")        # bench frame's loop: the RGBA8 image read back
             bare.append(_bare(world, args.frames, dt))
+            world.set_image("rgba" if args.png else "yuv420p")   # as capture reads
             c, w = _capture(world, timeline, args.frames, dt, video_path, size, args, png_dir)
             cap.append(c)
             write.append(w)

@@ -5,8 +5,10 @@
 
 Every frame advances the water by exactly 1/fps s of simulated time, so the same scene, seed and
 device give the same bytes. Frames stream to the encoder (ffmpeg from imageio-ffmpeg: H.264,
-yuv420p, fragmented MP4) while the next frame renders: frame N+1 is enqueued before frame N is
-encoded. The video is written to ``NAME.partial.mp4`` beside the output and renamed at the end;
+yuv420p, fragmented MP4) while the next frame renders: the device converts the frame to yuv420p
+planes (kernels/video_yuv.cl), frame N+1 is enqueued before frame N is read, and a writer thread
+feeds ffmpeg (x264 ``--preset``, a fixed thread count) while the loop goes on.
+The video is written to ``NAME.partial.mp4`` beside the output and renamed at the end;
 Ctrl-C or a crash closes the encoder properly and leaves that partial video playable, and says
 where it is (stopped before its first frame, it is removed). An existing output is kept unless
 ``--force``; an unwritable output or a missing encoder fails before any simulation, naming the
@@ -51,7 +53,12 @@ def add_arguments(p) -> None:
     p.add_argument("--frames-dir", metavar="DIR",
                    help="write a PNG sequence DIR/frame_000000.png ... (instead of or besides -o)")
     p.add_argument("--quality", type=float, default=8.0,
-                   help="H.264 quality 0-10 (imageio-ffmpeg's scale; default 8)")
+                   help="H.264 quality 0-10 (imageio-ffmpeg's scale: CRF (1 - q/10) * 51; "
+                        "default 8, CRF 10)")
+    p.add_argument("--preset", choices=PRESETS, default=PRESET,
+                   help=f"x264 speed preset (default {PRESET}: keeps up with the GPU at 1080p; "
+                        "slower ones make smaller files); the encoder runs a fixed "
+                        f"{THREADS} threads, so the bytes do not depend on the machine")
     p.add_argument("--workers", type=int, metavar="N",
                    help="render on N Ray actors (one per GPU, else per CPU), this process "
                         "stepping the water; same bytes as without (needs lbwater[cluster])")
@@ -139,54 +146,104 @@ def find_encoder() -> str:
 
 
 # ---- the encoder -------------------------------------------------------------------------------
-@contextlib.contextmanager
-def _sigint_deferred():
-    """Hold SIGINT for the duration of the block, then raise KeyboardInterrupt if one came."""
-    import signal
-    import threading
+#: x264 speed preset (ultrafast: ~19 ms/frame at 1920x1080 on one core; see README) and the
+#: encoder's thread count: fixed, not the machine's, since x264's bytes depend on it
+PRESET, THREADS = "ultrafast", 8
+PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow")
 
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    got = []
-    previous = signal.signal(signal.SIGINT, lambda *a: got.append(True))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    if got:
-        raise KeyboardInterrupt
+
+def crf(quality: float) -> int:
+    """H.264 CRF of a 0-10 quality (imageio-ffmpeg's scale: 10 is CRF 0, 8 is CRF 10)."""
+    return int((1 - quality / 10.0) * 51)
 
 
 class VideoWriter:
-    """H.264 yuv420p through imageio-ffmpeg's ``write_frames`` (ffmpeg in a subprocess that
-    ignores SIGINT, so Ctrl-C reaches only us and :meth:`close` still finishes the file).
-    Fragmented MP4: a file cut at any point plays up to its last fragment."""
+    """H.264 from yuv420p planes through imageio-ffmpeg's ``write_frames`` (ffmpeg in a
+    subprocess that ignores SIGINT, so Ctrl-C reaches only us and :meth:`close` still finishes
+    the file). Fragmented MP4: a file cut at any point plays up to its last fragment.
 
-    def __init__(self, path: Path, size: tuple[int, int], fps: float, quality: float):
+    :meth:`write` takes the flat Y, U, V planes (``World(image="yuv420p")``, converted on the
+    device) or an RGBA8 image (converted on the host by the same integer formula,
+    kernels.video_yuv: the same bytes). ffmpeg gets raw yuv420p (no swscale), BT.601 limited
+    range, tagged. A writer thread feeds the pipe from a queue of ``queue_frames`` frames, so
+    the frame loop renders frame N+1 while ffmpeg takes frame N; the writer is never
+    interrupted by Ctrl-C (only the main thread gets SIGINT), so no frame is ever cut."""
+
+    def __init__(self, path: Path, size: tuple[int, int], fps: float, quality: float, *,
+                 preset: str = PRESET, threads: int = THREADS, queue_frames: int = 2):
+        import queue
+        import threading
+
         import imageio_ffmpeg
 
-        self.path, self.frames = path, 0
+        from kernels.video_yuv import FFMPEG_TAGS, yuv_bytes
+
+        self.path, self.frames, self.size = path, 0, tuple(size)
+        self.frame_bytes = yuv_bytes(*self.size)
         params = ["-movflags", "frag_keyframe+empty_moov+default_base_moof",
                   "-g", str(max(1, round(fps))), "-flags", "+bitexact", "-fflags", "+bitexact",
-                  "-threads", "1"]
+                  "-crf", str(crf(quality)), "-preset", preset, "-threads", str(int(threads)),
+                  *FFMPEG_TAGS]
         self._gen = imageio_ffmpeg.write_frames(
-            str(path), size, pix_fmt_in="rgb24", pix_fmt_out="yuv420p", fps=fps,
-            quality=quality, codec="libx264", macro_block_size=1, ffmpeg_log_level="error",
+            str(path), size, pix_fmt_in="yuv420p", pix_fmt_out="yuv420p", fps=fps,
+            quality=None, codec="libx264", macro_block_size=1, ffmpeg_log_level="error",
             output_params=params)
         self._gen.send(None)
+        self._queue: queue.Queue = queue.Queue(maxsize=max(1, int(queue_frames)))
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._feed, name="lbwater-video", daemon=True)
+        self._thread.start()
 
-    def write(self, rgba: np.ndarray) -> None:
-        """Send one frame; a Ctrl-C arriving meanwhile is held until the frame is whole (an
-        interrupt inside the encoder's generator would kill ffmpeg and lose the file)."""
-        with _sigint_deferred():
-            self._gen.send(np.ascontiguousarray(rgba[..., :3]))
-            self.frames += 1
+    def _feed(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            if self._error is None:   # after an error, drain so the producer never blocks
+                try:
+                    self._gen.send(item)
+                    self.frames += 1
+                except BaseException as exc:  # noqa: BLE001 - handed to the frame loop
+                    self._error = exc
+
+    def _put(self, item) -> None:
+        import queue
+
+        while True:
+            if self._error is not None:
+                raise self._error
+            try:
+                self._queue.put(item, timeout=0.1)
+                return
+            except queue.Full:
+                if not self._thread.is_alive():
+                    raise RuntimeError("internal error: the video writer thread died") from None
+
+    def write(self, image: np.ndarray) -> None:
+        """Queue one frame (waits only while ``queue_frames`` frames are waiting already). The
+        array must not change afterwards: World.read_frame hands out fresh copies."""
+        if image.ndim == 3:
+            from kernels.video_yuv import rgba_to_yuv420p
+
+            image = rgba_to_yuv420p(image)
+        if image.dtype != np.uint8 or image.size != self.frame_bytes:
+            raise RuntimeError(f"internal error: a yuv420p frame of {self.size} is "
+                               f"{self.frame_bytes} bytes, got {image.size} of {image.dtype}")
+        self._put(np.ascontiguousarray(image))
 
     def close(self) -> None:
-        if self._gen is not None:
+        """Write the frames still queued, then finish the file (ffmpeg flushes and exits)."""
+        if self._gen is None:
+            return
+        try:
+            if self._thread.is_alive():
+                self._queue.put(None)
+                self._thread.join()
+        finally:
             gen, self._gen = self._gen, None
             gen.close()
+        if self._error is not None:
+            raise self._error
 
 
 def _write_png(folder: Path, index: int, rgba: np.ndarray) -> None:
@@ -277,9 +334,9 @@ def frame_count(args, timeline) -> int:
 
 
 def _local_frames(world, timeline, n: int, dt: float):
-    """Yield (i, RGBA8, guard dict) for frames 0..n-1 of one World (the timeline's frames; the
+    """Yield (i, image, guard dict) for frames 0..n-1 of one World (the timeline's frames; the
     World may have run frames before), frame i+1 enqueued before frame i is read (it renders
-    while i is encoded)."""
+    while i is encoded). The image is the World's (RGBA8 or yuv420p planes), a fresh array."""
     first = world.frames_enqueued
     timeline.apply(world, 0)
     world.enqueue_frame(dt)
@@ -292,7 +349,7 @@ def _local_frames(world, timeline, n: int, dt: float):
             raise RuntimeError(f"internal error: frame {index} came back for frame {first + i}")
         st = world.stats
         guard = st.guard if st is not None and st.frame == index and st.guard else {}
-        yield i, np.array(img, copy=True), guard
+        yield i, img, guard   # read_frame copies it out of the pinned ring
 
 
 def _cluster_frames(args, scene, timeline, n: int, dt: float, kw: dict, stack):
@@ -371,14 +428,16 @@ def run(args) -> int:
         with contextlib.ExitStack() as stack:
             if workers is not None:
                 size_got, frames = _cluster_frames(args, scene, timeline, n, dt, kw, stack)
-            else:
-                world = open_world(scene, args.device, **kw)
+            else:   # the video alone: yuv420p planes made on the device, 1.5 B/px read
+                image = "yuv420p" if frames_dir is None else "rgba"
+                world = open_world(scene, args.device, image=image, **kw)
                 stack.callback(world.close)
                 size_got, frames = world.size, _local_frames(world, timeline, n, dt)
             if tuple(size_got) != size:
                 raise RuntimeError(f"internal error: asked {size}, the World renders {size_got}")
             if args.output is not None:
-                video = VideoWriter(partial_path(out), size, args.fps, args.quality)
+                video = VideoWriter(partial_path(out), size, args.fps, args.quality,
+                                    preset=getattr(args, "preset", PRESET))
             t0 = time.perf_counter()
             _stream(frames, n, video, frames_dir, st, not args.quiet)
     except BaseException:

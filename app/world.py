@@ -12,8 +12,9 @@ A frame is an ordered list of stages, each only enqueuing device work (no host s
     caustics    photons through the water into the pool's caustic map (raytrace.caustics;
                 only with ``[shading] caustics = "traced"`` or ``set_caustics("traced")``)
     render      the wavefront Whitted frame, tonemapped to RGBA8 on the device
-    readback    non-blocking copies of the RGBA8 image, the guard record and the ray counts
-                into this frame's slot of host arrays
+    readback    non-blocking copies of the RGBA8 image (or, with ``image="yuv420p"``, of its
+                yuv420p planes made on the device: kernels.video_yuv), the guard record and
+                the ray counts into this frame's slot of host arrays
 
 A new stage (floating boats, caustics, a HUD) is one more object with a ``name`` and an
 ``enqueue(frame)`` method, inserted in :attr:`World.stages` where its inputs are ready.
@@ -83,7 +84,7 @@ class _Slot:
     def __init__(self):
         self.frame: Frame | None = None
         self.t0 = 0.0
-        self.rgba = self.counts = self.guard = None  # kernels.pinned.ReadHandle
+        self.image = self.counts = self.guard = None  # kernels.pinned.ReadHandle
 
 
 def buffer_bytes(*roots) -> int:
@@ -121,12 +122,16 @@ class World:
     its longer side); ``water_steps`` overrides ``[pool] steps`` (LBM steps before the first
     frame); ``seed`` overrides ``[shading] seed``; ``rebuild_water_bvh`` rebuilds the water BVH
     each frame instead of refitting it; ``caustics`` (off | traced) overrides ``[shading]
-    caustics`` (True/False: traced/off).
+    caustics`` (True/False: traced/off). ``image``: what :meth:`read_frame` returns, ``"rgba"``
+    (height, width, 4) or ``"yuv420p"`` (the flat Y, U, V planes a video encoder takes,
+    converted on the device: 1.5 bytes a pixel cross to the host instead of 4).
     """
+
+    IMAGES = ("rgba", "yuv420p")
 
     def __init__(self, scene, device=None, *, width=None, height=None, spp=None, bounces=None,
                  aov=False, water_steps=None, cells=None, rebuild_water_bvh=False,
-                 seed=None, frames_in_flight: int = 2, caustics=None):
+                 seed=None, frames_in_flight: int = 2, caustics=None, image: str = "rgba"):
         from app.assemble import assemble, caustic_settings, render_settings
         from app.scene import Scene, load_scene
         from kernels import get_runtime
@@ -138,6 +143,8 @@ class World:
         if not isinstance(scene, Scene):
             raise InputError(f"World: scene must be a scene file or app.scene.Scene, got "
                              f"{type(scene).__name__}")
+        if image not in self.IMAGES:   # before any device work
+            raise InputError(f"World: image {image!r} must be one of {', '.join(self.IMAGES)}")
         if not 1 <= int(frames_in_flight) <= 8:
             raise InputError(f"frames_in_flight {frames_in_flight} out of range; allowed [1, 8]")
         self.scene = scene
@@ -169,13 +176,15 @@ class World:
 
         n = int(frames_in_flight)
         w, h = self.size
-        self._rings = {"rgba": PinnedRing(self.rt, 4 * w * h, np.uint8, (h, w, 4), slots=n),
+        self.image, self._yuv = None, None   # set_image: kernels.video_yuv with yuv420p
+        self._rings = {"image": None,
                        "counts": PinnedRing(self.rt, 4 * STATS_LEN, np.uint32, (STATS_LEN,),
                                             slots=n)}
         if self.sim is not None:
             self._rings["guard"] = PinnedRing(self.rt, GUARD_DTYPE.itemsize, GUARD_DTYPE, (1,),
                                               slots=n)
         self._slots = [_Slot() for _ in range(n)]
+        self.set_image(image)
         self._free = deque(self._slots)
         self._in_flight: deque[_Slot] = deque()
         self._guard_prev = None
@@ -381,6 +390,28 @@ class World:
             return 0
         return int(math.floor(self._carry + seconds / self.sim.dt + 1e-9))
 
+    def set_image(self, image: str) -> None:
+        """What :meth:`read_frame` returns from the next frame on: ``"rgba"`` or ``"yuv420p"``
+        (frames in flight are completed first)."""
+        from kernels.pinned import PinnedRing
+        from kernels.video_yuv import YuvConverter
+
+        if image not in self.IMAGES:
+            raise InputError(f"World: image {image!r} must be one of {', '.join(self.IMAGES)}")
+        if image == self.image:
+            return
+        if getattr(self, "_in_flight", None):
+            self.drain()
+        w, h = self.size
+        n = len(self._slots)
+        if image == "yuv420p":
+            self._yuv = YuvConverter(self.rt, w, h)
+            ring = PinnedRing(self.rt, self._yuv.nbytes, np.uint8, (self._yuv.nbytes,), slots=n)
+        else:
+            self._yuv = None
+            ring = PinnedRing(self.rt, 4 * w * h, np.uint8, (h, w, 4), slots=n)
+        self._rings["image"], self.image = ring, image
+
     # -- the frame --------------------------------------------------------------------------
     def enqueue_frame(self, seconds: float = 0.0) -> int:
         """Queue one frame advancing the water by ``seconds``; returns its index. Waits only
@@ -423,7 +454,8 @@ class World:
         self._next += 1
 
     def read_frame(self) -> tuple[int, np.ndarray]:
-        """Wait for the oldest frame in flight; its index and RGBA8 image (height, width, 4)."""
+        """Wait for the oldest frame in flight; its index and image: RGBA8 (height, width, 4),
+        or with ``image="yuv420p"`` the flat uint8 Y, U, V planes."""
         if not self._in_flight:
             raise InputError("read_frame: no frame in flight (call enqueue_frame first)")
         slot = self._in_flight.popleft()
@@ -548,7 +580,7 @@ class World:
             self._complete(self._in_flight.popleft(), keep_image=False)
 
     def _complete(self, slot: _Slot, keep_image: bool):
-        rgba = slot.rgba.wait()
+        rgba = slot.image.wait()
         wall = (time.perf_counter() - slot.t0) * 1e3
         for tag, ms in self.rt.timer.completed():
             self._stage_ms[tag] = ms
@@ -756,7 +788,8 @@ class _Render:
 
 
 class _Readback:
-    """Non-blocking copies of the image, the ray counts and the guard record into the slot."""
+    """Non-blocking copies of the image (RGBA8, or yuv420p converted here on the device), the
+    ray counts and the guard record into the slot."""
 
     name = "readback"
 
@@ -769,5 +802,9 @@ class _Readback:
         slot.counts = rings["counts"].enqueue_read(q, r.stats)
         if w.sim is not None:
             slot.guard = rings["guard"].enqueue_read(q, w.sim.guard_buffer)
-        slot.rgba = rings["rgba"].enqueue_read(q, r.rgba)
+        src = r.rgba
+        if w._yuv is not None:
+            w._yuv.enqueue(src)
+            src = w._yuv.yuv
+        slot.image = rings["image"].enqueue_read(q, src)
         q.flush()

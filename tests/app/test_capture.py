@@ -72,6 +72,21 @@ def test_ten_frames_decode_at_the_asked_size_and_runs_are_byte_identical(scene, 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.mp4", "b.mp4", "s.toml"]
 
 
+def test_device_yuv_and_host_yuv_give_the_same_video(scene, tmp_path):
+    """-o alone reads yuv420p planes made on the device; with --frames-dir the World reads RGBA
+    and the writer converts on the host: the same integers, so the same bytes."""
+    a, b = tmp_path / "device.mp4", tmp_path / "host.mp4"
+    common = ["--frames", "6", "--fps", "10", "--seed", "5", "--quiet"]
+    assert main(["capture", str(scene), "-o", str(a), *common]) == 0
+    assert main(["capture", str(scene), "-o", str(b), "--frames-dir", str(tmp_path / "f"),
+                 *common]) == 0
+    assert a.read_bytes() == b.read_bytes()
+    frames = [iio.imread(tmp_path / "f" / f"frame_{i:06d}.png").astype(int) for i in range(6)]
+    _, decoded = _decode(a)
+    rgb = decoded[-1].reshape(32, 48, 3).astype(int)   # BT.601 limited range back to RGB
+    assert np.abs(rgb - frames[-1][..., :3]).mean() < 6, "colours as rendered"
+
+
 def test_timeline_drop_lands_in_its_frame(scene, tmp_path):
     frames = tmp_path / "frames"
     assert main(["capture", str(scene), "--frames-dir", str(frames), "--frames", "7",
