@@ -132,14 +132,19 @@ def test_sigint_leaves_a_playable_partial_video(scene, tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.Popen(
         [sys.executable, "-m", "app.cli", "capture", str(scene), "-o", str(out), "--frames-dir",
-         str(frames), "--frames", "400", "--fps", "10", "--quiet"],
+         str(frames), "--frames", "100000", "--fps", "10", "--quiet"],
         cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 120
-    while not (frames / "frame_000003.png").exists():
-        assert proc.poll() is None and time.time() < deadline, "capture never reached frame 3"
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    # far more frames than any device renders before the signal (a GPU finished 400 first)
+    try:
+        deadline = time.time() + 120
+        while not (frames / "frame_000003.png").exists():
+            assert proc.poll() is None and time.time() < deadline, "capture never reached frame 3"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
     assert proc.returncode == 130, err
     partial = tmp_path / "v.partial.mp4"
     assert str(partial) in err and not out.exists(), err
