@@ -319,11 +319,3 @@ class Kernel:
         evt = cl.enqueue_nd_range_kernel(rt.queue, self.kernel, gs, ls, wait_for=wait_for)
         return rt.timer.record(self.stage, evt)
 
-
-def enqueue_bound(rt: Runtime, stage: str, kernel: cl.Kernel, global_size, local_size=None, *,
-                  wait_for=None) -> cl.Event:
-    """Deprecated (``Runtime.launch``, kept while lbm/solver.py binds positionally): enqueue a
-    raw ``cl.Kernel`` whose arguments are already set and record it under ``stage``."""
-    gs, ls = _sizes(global_size, local_size)
-    evt = cl.enqueue_nd_range_kernel(rt.queue, kernel, gs, ls, wait_for=wait_for)
-    return rt.timer.record(stage, evt)

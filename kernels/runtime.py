@@ -242,16 +242,8 @@ class Runtime:
 
         return Kernel(self, source, name, stage=stage, defines=defines)
 
-    def launch(self, stage: str, kernel: cl.Kernel, global_size, local_size=None, *,
-               wait_for=None) -> cl.Event:
-        """Deprecated: kept only while lbm/solver.py binds raw kernels by position; use
-        :meth:`kernel_launcher`. Enqueue ``kernel`` and time it as ``stage``."""
-        from kernels.launch import enqueue_bound
-
-        return enqueue_bound(self, stage, kernel, global_size, local_size, wait_for=wait_for)
-
     def record(self, stage: str, event: cl.Event) -> cl.Event:
-        """Time an event that did not come from :meth:`launch` (a copy, a fill)."""
+        """Time an event that did not come from a kernel launcher (a copy, a fill)."""
         return self.timer.record(stage, event)
 
     def finish(self) -> None:
