@@ -2,12 +2,12 @@
 (moderngl.create_standalone_context(backend="egl")) stands in for the window's.
 
 Per image size: the bare frame (World.frame: water, BVH, render, RGBA8 read-back; what
-`bench frame` times), the window's loop (two frames in flight: enqueue the next, read the oldest,
-upload it to a texture through a pixel buffer, draw the quad into a framebuffer of that size,
-glFinish), and the upload + draw alone. The goal (issue 11): the window's loop <= 1.1x the bare
-frame. Every size is checked in the same run: the drawn framebuffer must equal the frame's image
-exactly, else the run fails. Each row names the GL renderer: where EGL lists several devices
-(a GPU and Mesa's llvmpipe), ``GLCONTEXT_DEVICE_INDEX=N`` picks another one.
+`bench frame` times), the window's loop (two frames in flight: enqueue the next, read the oldest
+into its pinned buffer without a copy, upload that to a texture, draw the quad into a framebuffer
+of that size, glFinish), and the upload + draw alone. The goal (issue 11): the window's loop
+<= 1.1x the bare frame. Every size is checked in the same run: the drawn framebuffer must equal
+the frame's image exactly, else the run fails. Each row names the GL renderer: where EGL lists
+several devices (a GPU and Mesa's llvmpipe), ``GLCONTEXT_DEVICE_INDEX=N`` picks another one.
 
 ``--quality auto|low|medium|high``: each size is a window's; the quality is chosen as `lbwater
 window` chooses it (auto: its probe drawn with the HUD into the window-size framebuffer) and the
@@ -36,7 +36,7 @@ def add_arguments(p) -> None:
     p.add_argument("--warmup", type=int, default=5, help="untimed frames first")
     p.add_argument("--frame-time", type=float, default=1 / 60,
                    help="simulated seconds of water per frame")
-    p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
+    p.add_argument("--upload", choices=("pbo", "direct"), default="direct",
                    help="texture upload path")
     p.add_argument("--quality", choices=("auto", "low", "medium", "high"),
                    help="sizes are windows' and the window's quality choice sets the image "
@@ -103,7 +103,7 @@ def run(args) -> int:
         for k in range(args.warmup + args.frames):
             t0 = time.perf_counter()
             world.enqueue_frame(ft)
-            _, img = world.read_frame()
+            _, img = world.read_frame(copy=False)   # as the window: uploaded before reuse
             t1 = time.perf_counter()
             presenter.upload(img)
             if quality is None:

@@ -1,11 +1,12 @@
 """Open an interactive window on a scene: rain, mouse ripples, an orbit camera and a HUD.
 
 Display path: each frame's RGBA8 image is read back without blocking (two frames in flight,
-World.enqueue_frame / read_frame) and uploaded to a GL texture through a pixel buffer (--upload
-direct: without one), then drawn as one quad with the HUD over it. Where the OpenCL device
-offers cl_khr_gl_sharing the window says so, but rendering straight into the GL texture is not
-implemented (PoCL and pip's pyopencl lack the extension, so it could not be tested here): the
-copy path is always used, and the start line and the HUD name it.
+World.enqueue_frame / read_frame(copy=False)) into a pinned buffer, which is handed as it is to
+the GL texture upload (--upload pbo: through two pixel buffers in turn), then drawn as one quad
+with the HUD over it: no host copy or conversion in Python, no GL wait per frame. Where the
+OpenCL device offers cl_khr_gl_sharing the window says so, but rendering straight into the GL
+texture is not implemented (PoCL and pip's pyopencl lack the extension, so it could not be tested
+here): the copy path is always used, and the start line and the HUD name it.
 
 Mouse: drag on the water makes ripples where the mouse ray meets the water; Shift+drag pushes the
 water along the drag; drag elsewhere orbits; right drag pans; the wheel zooms. Keys: R rain,
@@ -94,8 +95,9 @@ def add_arguments(p) -> None:
     p.add_argument("--record-events", help="write the input events to this JSON-lines file")
     p.add_argument("--frame-time", type=float,
                    help="simulated seconds per frame (default: the measured frame interval)")
-    p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
-                   help="texture upload: through a pixel buffer (default) or directly")
+    p.add_argument("--upload", choices=("pbo", "direct"), default="direct",
+                   help="texture upload: straight from the read-back buffer (default) or "
+                        "through two pixel buffers in turn")
     p.add_argument("--report", help="write the run's settings and FPS to this JSON file")
 
 
@@ -147,7 +149,7 @@ def caustics_label(scene, world) -> str:
     return mode
 
 
-def display_path(rt, upload: str = "pbo") -> str:
+def display_path(rt, upload: str = "direct") -> str:
     """Which display path is used and why, for the HUD and the start line."""
     how = "pixel-buffer" if upload == "pbo" else "direct"
     if "cl_khr_gl_sharing" in rt.device.extensions.split():
@@ -319,10 +321,17 @@ void main() { frag = vec4(texture(image, uv).rgb, 1.0); }
 
 
 class Presenter:
-    """Uploads RGBA8 frames into a texture (through a pixel buffer or directly) and draws them
-    over the current framebuffer's viewport. Works in any moderngl context (window or EGL)."""
+    """Uploads RGBA8 frames into a texture and draws them over the current framebuffer's
+    viewport. Works in any moderngl context (window or EGL).
 
-    def __init__(self, ctx, upload: str = "pbo"):
+    ``upload="direct"`` (default) hands the frame's array (the pinned read-back buffer itself,
+    World.read_frame(copy=False)) straight to glTexSubImage2D: the driver's one host copy.
+    ``"pbo"`` writes it into one of two pixel buffers in turn (frame N's write does not wait
+    for frame N-1's upload from the other) and uploads the texture from that buffer. Neither
+    copies or converts the array in Python (row 0 at the top is flipped in the quad's texture
+    coordinates), nor waits for the GPU."""
+
+    def __init__(self, ctx, upload: str = "direct"):
         if upload not in ("pbo", "direct"):
             raise ValueError(f"upload={upload!r}; allowed: pbo, direct")
         self.ctx, self.upload_mode = ctx, upload
@@ -331,10 +340,13 @@ class Presenter:
         self.vbo = ctx.buffer(quad.tobytes())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f", "pos")])
         self.texture = None
-        self.pbo = None
+        self.pbos: list = []
+        self.uploads = 0
         self.size = None
 
     def upload(self, img: np.ndarray) -> None:
+        """Upload ``img``, (H, W, 4) uint8, C-contiguous (else it is copied once here); its
+        bytes are consumed before this returns, so the caller may reuse the array at once."""
         h, w = img.shape[:2]
         if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 4:
             raise ValueError(f"Presenter.upload: need (H, W, 4) uint8, got {img.shape} "
@@ -342,18 +354,20 @@ class Presenter:
         if self.size != (w, h):
             if self.texture is not None:
                 self.texture.release()
-            if self.pbo is not None:
-                self.pbo.release()
+            for pbo in self.pbos:
+                pbo.release()
             self.texture = self.ctx.texture((w, h), 4)
-            self.pbo = self.ctx.buffer(reserve=w * h * 4, dynamic=True)
+            self.pbos = ([self.ctx.buffer(reserve=w * h * 4, dynamic=True) for _ in range(2)]
+                         if self.upload_mode == "pbo" else [])
             self.size = (w, h)
-        data = np.ascontiguousarray(img)
+        data = img if img.flags.c_contiguous else np.ascontiguousarray(img)
         if self.upload_mode == "pbo":
-            self.pbo.orphan()
-            self.pbo.write(data)
-            self.texture.write(self.pbo)
+            pbo = self.pbos[self.uploads % 2]
+            pbo.write(data)
+            self.texture.write(pbo)
         else:
             self.texture.write(data)
+        self.uploads += 1
 
     def draw(self, viewport_size) -> None:
         """Draw the last uploaded image over (0, 0, w, h) of the bound framebuffer."""
@@ -455,7 +469,7 @@ class Viewer:
     the ``on_*`` callbacks directly with synthesized events, as glfw would."""
 
     def __init__(self, scene, rt, *, window_size, quality, spp=1, frame_time=None,
-                 vsync=True, upload="pbo", replay: EventLog | None = None, record=False,
+                 vsync=True, upload="direct", replay: EventLog | None = None, record=False,
                  title="lbwater", visible=True):
         import glfw
         import moderngl
@@ -696,8 +710,8 @@ class Viewer:
             self.next_frame += 1
             self.in_flight += 1
         if self.in_flight >= 2 or (self.in_flight and (not more or req.quit)):
-            _, img = self.world.read_frame()
-            self.in_flight -= 1
+            _, img = self.world.read_frame(copy=False)   # the pinned buffer: uploaded now,
+            self.in_flight -= 1                             # before the next enqueue reuses it
             self.presenter.upload(img)
             self.shown += 1
             self._tick_fps()

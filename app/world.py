@@ -453,13 +453,15 @@ class World:
             self._caustics.reset_history()
         self._next += 1
 
-    def read_frame(self) -> tuple[int, np.ndarray]:
+    def read_frame(self, copy: bool = True) -> tuple[int, np.ndarray]:
         """Wait for the oldest frame in flight; its index and image: RGBA8 (height, width, 4),
-        or with ``image="yuv420p"`` the flat uint8 Y, U, V planes."""
+        or with ``image="yuv420p"`` the flat uint8 Y, U, V planes. ``copy=False`` returns the
+        pinned read-back array itself (no host copy; the window uploads it at once): its bytes
+        are this frame's only until the next :meth:`enqueue_frame` reuses the slot."""
         if not self._in_flight:
             raise InputError("read_frame: no frame in flight (call enqueue_frame first)")
         slot = self._in_flight.popleft()
-        return slot.frame.index, self._complete(slot, keep_image=True)
+        return slot.frame.index, self._complete(slot, keep_image="copy" if copy else "view")
 
     def frame(self, seconds: float = 0.0) -> np.ndarray:
         """One whole frame: advance the water by ``seconds``, render, return RGBA8 (height,
@@ -579,7 +581,9 @@ class World:
         while self._in_flight:
             self._complete(self._in_flight.popleft(), keep_image=False)
 
-    def _complete(self, slot: _Slot, keep_image: bool):
+    def _complete(self, slot: _Slot, keep_image: str | bool):
+        """Finish ``slot``'s frame (stats); its image: a copy (``"copy"``), the pinned array
+        itself (``"view"``), or None (False)."""
         rgba = slot.image.wait()
         wall = (time.perf_counter() - slot.t0) * 1e3
         for tag, ms in self.rt.timer.completed():
@@ -588,7 +592,7 @@ class World:
         stage_ms = self._stage_ms.pop(f.index, {})
         for old in [k for k in self._stage_ms if k < f.index]:
             del self._stage_ms[old]
-        img = rgba.copy() if keep_image else None
+        img = rgba.copy() if keep_image == "copy" else rgba if keep_image else None
         self._stats = self._make_stats(slot, stage_ms, wall)
         self._free.append(slot)
         return img

@@ -217,6 +217,27 @@ def test_stats_are_the_last_completed_frame(tiny, rt):
     assert dataclasses.is_dataclass(st)
 
 
+def test_read_frame_without_copy_is_the_pinned_buffer_with_the_frames_bytes(tiny, rt):
+    """The window's read (copy=False) hands over the pinned read-back array itself, holding the
+    same bytes a copying read of the same frame returns; no new array per frame."""
+    ref = World(tiny, rt).frame(1 / 30)
+    world = World(tiny, rt, frames_in_flight=2)
+    pinned = world._rings["image"]._arrays
+    world.enqueue_frame(1 / 30)
+    world.enqueue_frame(1 / 30)
+    i, img = world.read_frame(copy=False)
+    assert i == 0 and any(img is a for a in pinned)
+    assert np.array_equal(img, ref)
+    kept = img.copy()
+    world.enqueue_frame(1 / 30)   # reuses frame 0's slot: the view now holds frame 2
+    _, img1 = world.read_frame(copy=False)
+    _, img2 = world.read_frame(copy=False)
+    assert img2 is img and img1 is not img and not np.array_equal(img, kept)
+    world.enqueue_frame(1 / 30)
+    _, copied = world.read_frame()
+    assert not any(np.shares_memory(copied, a) for a in pinned)
+
+
 def test_pick_hits_the_live_water_where_the_tracer_says(tiny, rt):
     from raytrace import intersect
 
