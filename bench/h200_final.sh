@@ -12,6 +12,7 @@ lb bench frame --cells 1024 --size 1920 1080 --frames 40 --boats 16 --caustics o
 for rep in 1 2 3; do
     lb bench window --sizes 1280x720 1920x1080 --out "$out/window$rep" 2>&1 | tail -2
 done
+lb bench window --sizes 1280x720 1920x1080 --upload pbo --out "$out/window_pbo" 2>&1 | tail -2
 lb sweep scenes/pool.toml --cells 128,256,512,1024,2048 --size 640x360,1920x1080 --bounces 5 \
     --spp 1 --frames 20 --warmup 5 -o "$out/sweep" 2>&1 | tail -3
 exit 0
