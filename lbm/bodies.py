@@ -35,7 +35,8 @@ from lbm.structs import BODY_DTYPE, BODY_STEP_DTYPE, record
 MAX_BOATS = 16
 #: kernels/lbm_bodies.h LBM_BODY_WG.
 BODY_WG = 512
-#: Work-group size of the pressure pass on a GPU.
+#: Work-group size of the pressure pass (kernels/lbm_bodies.h LBM_PRESS_WG; per_body is a
+#: multiple of it, so a work-group presses for one body).
 PRESS_WG = 64
 #: Most work-items the pressure pass gives one body (its box is strided beyond that).
 PRESS_MAX_PER_BODY = 1 << 16
@@ -549,8 +550,7 @@ class Boats:
         if self._n == 0:
             return None
         self._k_press.bind(per_body=self.per_body, **args)
-        return self._k_press.launch(self._n * self.per_body,
-                                    PRESS_WG if self.rt.is_gpu else None)
+        return self._k_press.launch(self._n * self.per_body, PRESS_WG)
 
     # -- host reads (tests, saving) -------------------------------------------------------------
     def state(self) -> np.ndarray:

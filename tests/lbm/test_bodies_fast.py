@@ -29,6 +29,7 @@ def test_header_constants_match_the_host():
     defs = dict(re.findall(r"#define (LBM_\w+) (\d+)", text))
     assert int(defs["LBM_BODY_WG"]) == lb.BODY_WG
     assert int(defs["LBM_MAX_BODIES"]) == lb.MAX_BOATS
+    assert int(defs["LBM_PRESS_WG"]) == lb.PRESS_WG
 
 
 def _three_boats(rt, sim, coupled=False, origin=(0.0, 0.0, 0.0)):
