@@ -102,7 +102,7 @@ int4 lbm_body_box(const LbmParams p, const float4 origin, const float X, const f
 
 /* The cells the pressure head of ``body`` may cover, a subset of its bounding circle's box: the
  * world rectangle around the parallelogram where the still-water plane Y = L meets the prism of
- * the footprint grid (every column's cell, ring included), one cell of margin. A hull tilted
+ * the footprint grid's hull columns (the grid less its empty borders), one cell of margin. A hull tilted
  * past 75 degrees (|r1.y| < 0.25) keeps the circle's box. */
 int4 lbm_body_press_box(const LbmParams p, const float4 origin, const LbmBody* body)
 {
@@ -114,8 +114,11 @@ int4 lbm_body_press_box(const LbmParams p, const float4 origin, const LbmBody* b
     if (!(fabs(det) >= 0.25f)) return circle;
     const float h = body->torque.w - body->pos.y;
     const float4 fp = body->foot;
-    const float xa = fp.x - 0.5f * fp.z, xb = fp.x + ((float)body->foot_n.x - 0.5f) * fp.z;
-    const float za = fp.y - 0.5f * fp.w, zb = fp.y + ((float)body->foot_n.y - 0.5f) * fp.w;
+    const float ex = (float)body->flags.z, ez = (float)body->flags.w;   /* empty borders */
+    const float xa = fp.x + (ex - 0.5f) * fp.z;
+    const float xb = fp.x + ((float)body->foot_n.x - ex - 0.5f) * fp.z;
+    const float za = fp.y + (ez - 0.5f) * fp.w;
+    const float zb = fp.y + ((float)body->foot_n.y - ez - 0.5f) * fp.w;
     float lo_x = INFINITY, hi_x = -INFINITY, lo_z = INFINITY, hi_z = -INFINITY;
     for (int k = 0; k < 4; ++k) {
         const float a = ((k & 1) ? xb : xa) - r1.x * h, c = ((k & 2) ? zb : za) - r1.z * h;

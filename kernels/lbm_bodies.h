@@ -39,7 +39,8 @@ typedef struct {
     int4 foot_n;     /* nfx, nfz, offset of the first column in the footprint array, row of
                         the transform buffer this body writes */
     int4 flags;      /* x: 1 active; y: 1 held (the pose stays, at rest; the hull still
-                        presses on the water); z, w: unused */
+                        presses on the water); z, w: columns, rows of the footprint
+                        that are empty on each side (its ring, at least) */
     int4 box;        /* cells (i0, j0, i1, j1), inclusive, holding every cell the pressure head
                         of the pose the next pressure pass presses can cover (the footprint
                         where it meets the still water, within the bounding circle), one cell

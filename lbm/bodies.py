@@ -436,7 +436,10 @@ class Boats:
         rec["base_r0"], rec["base_r1"], rec["base_r2"] = body_from_mesh
         rec["foot"] = (hull.x0, hull.z0, hull.dfx, hull.dfz)
         rec["foot_n"] = (hull.footprint.shape[1], hull.footprint.shape[0], 0, int(row))
-        rec["flags"] = (1, 0, 0, 0)
+        full = hull.footprint[..., 1] >= hull.footprint[..., 0]
+        cols, rows = np.nonzero(full.any(0))[0], np.nonzero(full.any(1))[0]
+        rec["flags"] = (1, 0, min(cols[0], full.shape[1] - 1 - cols[-1]),
+                        min(rows[0], full.shape[0] - 1 - rows[-1]))
         # the whole grid: the first pressure pass after this restores every cell once
         rec["box"] = rec["box_old"] = (0, 0, self.sim.nx - 1, self.sim.ny - 1)
         self._host[k] = rec
