@@ -9,7 +9,9 @@
  *                         its pose, its row of the transform buffer (world_from_mesh) and the
  *                         cell box its pressure head will cover (box; the previous one: box_old)
  *   lbm_bodies_press      per_body work-items per body, each striding over the cells of its
- *                         box and box_old (a cell in several boxes: the lowest body's):
+ *                         box and box_old (a cell in several boxes: the lowest body's; the box:
+ *                         where the footprint meets the still-water plane, within the bounding
+ *                         circle's box; work-groups past a body's cells return at once):
  *                         zforce = bed + the hulls' pressure head, the "bed" the step kernel's
  *                         force sees, so a hull pushes water away (a wake, waves) and conserves
  *                         its volume exactly; cells of box_old that left the hull get the bed back
@@ -96,6 +98,48 @@ int4 lbm_body_box(const LbmParams p, const float4 origin, const float X, const f
     const int4 b = (int4)((int)floor(gx0) - 1, (int)floor(gz0) - 1, (int)ceil(gx1) + 1,
                           (int)ceil(gz1) + 1);
     return clamp(b, (int4)(0), (int4)(p.nx - 1, p.ny - 1, p.nx - 1, p.ny - 1));
+}
+
+/* The cells the pressure head of ``body`` may cover, a subset of its bounding circle's box: the
+ * world rectangle around the parallelogram where the still-water plane Y = L meets the prism of
+ * the footprint grid's hull columns (the grid less its empty borders), one cell of margin. A hull tilted
+ * past 75 degrees (|r1.y| < 0.25) keeps the circle's box. */
+int4 lbm_body_press_box(const LbmParams p, const float4 origin, const LbmBody* body)
+{
+    const int4 circle = lbm_body_box(p, origin, body->pos.x, body->pos.z, body->damping.w);
+    float3 r0, r1, r2;
+    lbm_quat_rows(body->quat, &r0, &r1, &r2);
+    /* loc.x = r0.x dX + r1.x h + r2.x dZ, loc.z = r0.z dX + r1.z h + r2.z dZ (loc = R^T d) */
+    const float det = r0.x * r2.z - r2.x * r0.z;
+    if (!(fabs(det) >= 0.25f)) return circle;
+    const float h = body->torque.w - body->pos.y;
+    const float4 fp = body->foot;
+    const float ex = (float)body->flags.z, ez = (float)body->flags.w;   /* empty borders */
+    const float xa = fp.x + (ex - 0.5f) * fp.z;
+    const float xb = fp.x + ((float)body->foot_n.x - ex - 0.5f) * fp.z;
+    const float za = fp.y + (ez - 0.5f) * fp.w;
+    const float zb = fp.y + ((float)body->foot_n.y - ez - 0.5f) * fp.w;
+    float lo_x = INFINITY, hi_x = -INFINITY, lo_z = INFINITY, hi_z = -INFINITY;
+    for (int k = 0; k < 4; ++k) {
+        const float a = ((k & 1) ? xb : xa) - r1.x * h, c = ((k & 2) ? zb : za) - r1.z * h;
+        const float dX = (r2.z * a - r2.x * c) / det, dZ = (r0.x * c - r0.z * a) / det;
+        lo_x = fmin(lo_x, dX);
+        hi_x = fmax(hi_x, dX);
+        lo_z = fmin(lo_z, dZ);
+        hi_z = fmax(hi_z, dZ);
+    }
+    const float gx0 = (body->pos.x + lo_x - origin.x) / p.dx - 0.5f;
+    const float gx1 = (body->pos.x + hi_x - origin.x) / p.dx - 0.5f;
+    const float gz0 = (body->pos.z + lo_z - origin.z) / p.dx - 0.5f;
+    const float gz1 = (body->pos.z + hi_z - origin.z) / p.dx - 0.5f;
+    if (!(isfinite(gx0) && isfinite(gx1) && isfinite(gz0) && isfinite(gz1))) return circle;
+    const float4 g = clamp((float4)(floor(gx0) - 1.0f, floor(gz0) - 1.0f, ceil(gx1) + 1.0f,
+                                    ceil(gz1) + 1.0f), -1.0f, (float)(max(p.nx, p.ny) + 1));
+    const int4 t = convert_int4(g);
+    const int4 b = (int4)(max(t.x, circle.x), max(t.y, circle.y), min(t.z, circle.z),
+                          min(t.w, circle.w));
+    /* never empty: a hull off every cell keeps one cell of its circle's box */
+    return (b.x <= b.z && b.y <= b.w) ? b : circle.xyxy;
 }
 
 /* One work-item's share of the columns of ``body`` at its current pose: force, torque,
@@ -237,7 +281,7 @@ void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* re
     if (lid != 0) return;
     LbmBody body = l_body;
     body.box_old = body.box;
-    body.box = lbm_body_box(p, s.origin, body.pos.x, body.pos.z, body.damping.w);
+    body.box = lbm_body_press_box(p, s.origin, &body);
     bodies[b] = body;
 
     /* world_from_mesh = [R | pos] . body_from_mesh */
@@ -260,39 +304,44 @@ typedef struct {
     float4 r0, r1, r2; /* world_from_body rows; r0.w: the still-water level L, m */
     float4 foot;       /* x0, z0, dfx, dfz */
     int4 n;            /* nfx, nfz, footprint offset, active */
-    int4 box;          /* cells of box and box_old: the bounding rectangle of both */
 } LbmPressBody;
 
-/* Stage bodies[0, n) in l_b (every work-item of the group calls it: it ends in a barrier). */
-void lbm_stage_bodies(__local LbmPressBody* l_b, __global const LbmBody* bodies, const int n)
+/* Stage body *src in *dst (built in private memory, then copied). */
+void lbm_press_body(__local LbmPressBody* dst, __global const LbmBody* src)
 {
-    const int lid = get_local_id(0) + get_local_id(1) * get_local_size(0);
-    const int ls = get_local_size(0) * get_local_size(1);
-    for (int b = lid; b < n; b += ls) {
-        const LbmBody B = bodies[b];
-        float3 r0, r1, r2;
-        lbm_quat_rows(B.quat, &r0, &r1, &r2);
-        LbmPressBody o;
-        o.pos = (float4)(B.pos.xyz, B.damping.w);
-        o.r0 = (float4)(r0, B.torque.w);
-        o.r1 = (float4)(r1, 0.0f);
-        o.r2 = (float4)(r2, 0.0f);
-        o.foot = B.foot;
-        o.n = (int4)(B.foot_n.x, B.foot_n.y, B.foot_n.z, B.flags.x);
-        o.box = (int4)(min(B.box.x, B.box_old.x), min(B.box.y, B.box_old.y),
-                       max(B.box.z, B.box_old.z), max(B.box.w, B.box_old.w));
-        l_b[b] = o;
-    }
-    barrier(CLK_LOCAL_MEM_FENCE);
+    const LbmBody B = *src;
+    float3 r0, r1, r2;
+    lbm_quat_rows(B.quat, &r0, &r1, &r2);
+    LbmPressBody o;
+    o.pos = (float4)(B.pos.xyz, B.damping.w);
+    o.r0 = (float4)(r0, B.torque.w);
+    o.r1 = (float4)(r1, 0.0f);
+    o.r2 = (float4)(r2, 0.0f);
+    o.foot = B.foot;
+    o.n = (int4)(B.foot_n.x, B.foot_n.y, B.foot_n.z, B.flags.x);
+    *dst = o;
 }
 
-/* The hulls' pressure head (m) at world (X, Z): per hull over it, clamp(L - Y_b, 0, Y_t - Y_b)
- * of its nearest footprint column. */
-float lbm_hull_head(__local const LbmPressBody* l_b, const int n,
+/* The cells a body's pressure pass covers: the bounding rectangle of box and box_old. */
+int4 lbm_press_cells(const int4 box, const int4 box_old)
+{
+    return (int4)(min(box.x, box_old.x), min(box.y, box_old.y), max(box.z, box_old.z),
+                  max(box.w, box_old.w));
+}
+
+int lbm_boxes_meet(const int4 a, const int4 b)
+{
+    return a.x <= b.z && b.x <= a.z && a.y <= b.w && b.y <= a.w;
+}
+
+/* The hulls' pressure head (m) at world (X, Z): over the bodies in ``mask`` (bit b: body b, in
+ * increasing b), per hull over it, clamp(L - Y_b, 0, Y_t - Y_b) of its nearest footprint column. */
+float lbm_hull_head(__local const LbmPressBody* l_b, const int mask,
                     __global const float2* restrict foot, const float X, const float Z)
 {
     float d = 0.0f;
-    for (int b = 0; b < n; ++b) {
+    for (int m = mask; m != 0; m &= m - 1) {
+        const int b = 31 - clz(m & -m);
         if (l_b[b].n.w == 0) continue;
         const float4 pos = l_b[b].pos;
         const float dxw = X - pos.x, dzw = Z - pos.z;
@@ -318,33 +367,56 @@ float lbm_hull_head(__local const LbmPressBody* l_b, const int n,
 }
 
 /* zforce = bed + the hulls' pressure head over the cells of each body's box and box_old (its
- * previous box: cells the hull left get the bed back). 1D launch: per_body work-items for body
- * b = gid / per_body, striding over its cells; a cell in several boxes is the lowest body's. */
-__kernel void lbm_bodies_press(__global const float* restrict bed, __global float* zforce,
-                               const LbmParams p, __global const float2* restrict foot,
-                               __global const LbmBody* restrict bodies, const LbmBodyStep s,
-                               const int per_body)
+ * previous box: cells the hull left get the bed back). 1D launch in work-groups of
+ * LBM_PRESS_WG: per_body work-items (a multiple of LBM_PRESS_WG) for body b = gid / per_body,
+ * striding over its cells; a work-group past its body's cells stages and writes nothing. A cell in
+ * several bodies' cells is the lowest body's. A work-group stages only the bodies whose box
+ * meets its body's cells (the others press nothing there). */
+__kernel __attribute__((reqd_work_group_size(LBM_PRESS_WG, 1, 1)))
+void lbm_bodies_press(__global const float* restrict bed, __global float* zforce,
+                      const LbmParams p, __global const float2* restrict foot,
+                      __global const LbmBody* restrict bodies, const LbmBodyStep s,
+                      const int per_body)
 {
     __local LbmPressBody l_b[LBM_MAX_BODIES];
+    __local int l_near, l_lower;
     const int n = min(s.n_bodies, LBM_MAX_BODIES);
-    lbm_stage_bodies(l_b, bodies, n);
-    const int gid = get_global_id(0);
-    const int b = gid / per_body, k0 = gid - b * per_body;
-    if (b >= n || l_b[b].n.w == 0) return;
-    const int4 box = l_b[b].box;
+    const int lid = get_local_id(0), g0 = get_group_id(0) * LBM_PRESS_WG;
+    const int b = g0 / per_body, k0 = g0 - b * per_body + lid;
+    /* every work-item reaches the barriers (PoCL needs it); groups with no cell stage nothing */
+    int4 box = (int4)(0, 0, -1, -1);
+    if (b < n && bodies[b].flags.x != 0) box = lbm_press_cells(bodies[b].box, bodies[b].box_old);
     const int w = box.z - box.x + 1, area = w * (box.w - box.y + 1);
+    const int go = k0 - lid < area;   /* uniform: the group has a cell */
+    if (lid == 0) {
+        l_near = 0;
+        l_lower = 0;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int o = lid; go && o < n; o += LBM_PRESS_WG) {
+        if (bodies[o].flags.x == 0) continue;
+        if (o < b && lbm_boxes_meet(box, lbm_press_cells(bodies[o].box, bodies[o].box_old)))
+            atomic_or(&l_lower, 1 << o);
+        if (lbm_boxes_meet(box, bodies[o].box)) {
+            lbm_press_body(&l_b[o], &bodies[o]);
+            atomic_or(&l_near, 1 << o);
+        }
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    const int near = l_near, lower = l_lower;
     for (int c = k0; c < area; c += per_body) {
         const int i = box.x + c % w, j = box.y + c / w;
         int mine = 1;
-        for (int o = 0; o < b; ++o) {
-            const int4 ob = l_b[o].box;
-            if (l_b[o].n.w != 0 && i >= ob.x && i <= ob.z && j >= ob.y && j <= ob.w) mine = 0;
+        for (int m = lower; m != 0; m &= m - 1) {
+            const int o = 31 - clz(m & -m);
+            const int4 ob = lbm_press_cells(bodies[o].box, bodies[o].box_old);
+            if (i >= ob.x && i <= ob.z && j >= ob.y && j <= ob.w) mine = 0;
         }
         if (!mine) continue;
         const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
         const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
         const int cell = LBM_CELL(p, i, j);
-        zforce[cell] = bed[cell] + lbm_hull_head(l_b, n, foot, X, Z);
+        zforce[cell] = bed[cell] + lbm_hull_head(l_b, near, foot, X, Z);
     }
 }
 
@@ -355,11 +427,14 @@ __kernel void lbm_bodies_press_all(__global const float* restrict bed, __global 
 {
     __local LbmPressBody l_b[LBM_MAX_BODIES];
     const int n = min(s.n_bodies, LBM_MAX_BODIES);
-    lbm_stage_bodies(l_b, bodies, n);
+    const int lid = get_local_id(0) + get_local_id(1) * get_local_size(0);
+    const int ls = get_local_size(0) * get_local_size(1);
+    for (int b = lid; b < n; b += ls) lbm_press_body(&l_b[b], &bodies[b]);
+    barrier(CLK_LOCAL_MEM_FENCE);
     const int i = get_global_id(0), j = get_global_id(1);
     if (i >= p.nx || j >= p.ny) return;
     const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
     const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
     const int cell = LBM_CELL(p, i, j);
-    zforce[cell] = bed[cell] + lbm_hull_head(l_b, n, foot, X, Z);
+    zforce[cell] = bed[cell] + lbm_hull_head(l_b, (1 << n) - 1, foot, X, Z);
 }

@@ -13,6 +13,8 @@
 
 /* Work-group size of lbm_bodies_step: one work-group per body (a power of two). */
 #define LBM_BODY_WG 512
+/* Work-group size of lbm_bodies_press (lbm/bodies.py PRESS_WG). */
+#define LBM_PRESS_WG 64
 /* Most bodies (lbm/bodies.py MAX_BOATS): the pressure kernels stage them all in local memory. */
 #define LBM_MAX_BODIES 16
 
@@ -37,10 +39,12 @@ typedef struct {
     int4 foot_n;     /* nfx, nfz, offset of the first column in the footprint array, row of
                         the transform buffer this body writes */
     int4 flags;      /* x: 1 active; y: 1 held (the pose stays, at rest; the hull still
-                        presses on the water); z, w: unused */
-    int4 box;        /* cells (i0, j0, i1, j1), inclusive, holding the bounding circle of the
-                        pose the next pressure pass presses, one cell of margin (set by the
-                        bodies step) */
+                        presses on the water); z, w: columns, rows of the footprint
+                        that are empty on each side (its ring, at least) */
+    int4 box;        /* cells (i0, j0, i1, j1), inclusive, holding every cell the pressure head
+                        of the pose the next pressure pass presses can cover (the footprint
+                        where it meets the still water, within the bounding circle), one cell
+                        of margin (set by the bodies step) */
     int4 box_old;    /* the box of the pose pressed before: the pressure pass restores it */
 } LbmBody;
 

@@ -35,7 +35,8 @@ from lbm.structs import BODY_DTYPE, BODY_STEP_DTYPE, record
 MAX_BOATS = 16
 #: kernels/lbm_bodies.h LBM_BODY_WG.
 BODY_WG = 512
-#: Work-group size of the pressure pass on a GPU.
+#: Work-group size of the pressure pass (kernels/lbm_bodies.h LBM_PRESS_WG; per_body is a
+#: multiple of it, so a work-group presses for one body).
 PRESS_WG = 64
 #: Most work-items the pressure pass gives one body (its box is strided beyond that).
 PRESS_MAX_PER_BODY = 1 << 16
@@ -435,7 +436,10 @@ class Boats:
         rec["base_r0"], rec["base_r1"], rec["base_r2"] = body_from_mesh
         rec["foot"] = (hull.x0, hull.z0, hull.dfx, hull.dfz)
         rec["foot_n"] = (hull.footprint.shape[1], hull.footprint.shape[0], 0, int(row))
-        rec["flags"] = (1, 0, 0, 0)
+        full = hull.footprint[..., 1] >= hull.footprint[..., 0]
+        cols, rows = np.nonzero(full.any(0))[0], np.nonzero(full.any(1))[0]
+        rec["flags"] = (1, 0, min(cols[0], full.shape[1] - 1 - cols[-1]),
+                        min(rows[0], full.shape[0] - 1 - rows[-1]))
         # the whole grid: the first pressure pass after this restores every cell once
         rec["box"] = rec["box_old"] = (0, 0, self.sim.nx - 1, self.sim.ny - 1)
         self._host[k] = rec
@@ -549,8 +553,7 @@ class Boats:
         if self._n == 0:
             return None
         self._k_press.bind(per_body=self.per_body, **args)
-        return self._k_press.launch(self._n * self.per_body,
-                                    PRESS_WG if self.rt.is_gpu else None)
+        return self._k_press.launch(self._n * self.per_body, PRESS_WG)
 
     # -- host reads (tests, saving) -------------------------------------------------------------
     def state(self) -> np.ndarray:
