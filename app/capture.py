@@ -366,8 +366,10 @@ def _cluster_frames(args, scene, timeline, n: int, dt: float, kw: dict, stack):
         return stepper.snapshot_frame(dt)
 
     first = snapshot_of(0)
+    # the video alone: the actors convert to yuv420p on their devices (1.5 B/px back through Ray)
+    actor_kw = {**kw, "image": "yuv420p"} if args.frames_dir is None else kw
     pool = cluster.Pool(args.workers, address=args.ray_address, device=args.device,
-                        capture=(str(Path(args.scene).resolve()), kw, first))
+                        capture=(str(Path(args.scene).resolve()), actor_kw, first))
     stack.callback(pool.close)
     size = tuple(pool.info[pool.live[0]]["size"])
     kept = {0: first}

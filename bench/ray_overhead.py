@@ -31,7 +31,8 @@ def run_once(scene: str, frames: int, size: str, workers: int | None, out: Path,
         cmd += ["--workers", str(workers)]
     if device:
         cmd += ["--device", device]
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p))
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
     total = time.perf_counter() - t0
