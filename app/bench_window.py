@@ -36,8 +36,8 @@ def add_arguments(p) -> None:
     p.add_argument("--warmup", type=int, default=5, help="untimed frames first")
     p.add_argument("--frame-time", type=float, default=1 / 60,
                    help="simulated seconds of water per frame")
-    p.add_argument("--upload", choices=("pbo", "direct"), default="direct",
-                   help="texture upload path")
+    p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
+                   help="texture upload path (default pbo, as the window)")
     p.add_argument("--quality", choices=("auto", "low", "medium", "high"),
                    help="sizes are windows' and the window's quality choice sets the image "
                         "(default: the image is the size, at the scene's settings)")

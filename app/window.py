@@ -95,9 +95,10 @@ def add_arguments(p) -> None:
     p.add_argument("--record-events", help="write the input events to this JSON-lines file")
     p.add_argument("--frame-time", type=float,
                    help="simulated seconds per frame (default: the measured frame interval)")
-    p.add_argument("--upload", choices=("pbo", "direct"), default="direct",
-                   help="texture upload: straight from the read-back buffer (default) or "
-                        "through two pixel buffers in turn")
+    p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
+                   help="texture upload: through two pixel buffers in turn (default; the "
+                        "faster on the NVIDIA H200) or straight from the read-back buffer "
+                        "(the faster on Mesa's llvmpipe)")
     p.add_argument("--report", help="write the run's settings and FPS to this JSON file")
 
 
@@ -149,7 +150,7 @@ def caustics_label(scene, world) -> str:
     return mode
 
 
-def display_path(rt, upload: str = "direct") -> str:
+def display_path(rt, upload: str = "pbo") -> str:
     """Which display path is used and why, for the HUD and the start line."""
     how = "pixel-buffer" if upload == "pbo" else "direct"
     if "cl_khr_gl_sharing" in rt.device.extensions.split():
@@ -324,14 +325,16 @@ class Presenter:
     """Uploads RGBA8 frames into a texture and draws them over the current framebuffer's
     viewport. Works in any moderngl context (window or EGL).
 
-    ``upload="direct"`` (default) hands the frame's array (the pinned read-back buffer itself,
-    World.read_frame(copy=False)) straight to glTexSubImage2D: the driver's one host copy.
-    ``"pbo"`` writes it into one of two pixel buffers in turn (frame N's write does not wait
-    for frame N-1's upload from the other) and uploads the texture from that buffer. Neither
+    ``upload="pbo"`` (default) writes the frame's array (the pinned read-back buffer itself,
+    World.read_frame(copy=False)) into one of two pixel buffers in turn (frame N's write does
+    not wait for frame N-1's upload from the other) and uploads the texture from that buffer;
+    ``"direct"`` hands the array straight to glTexSubImage2D (the driver's one host copy).
+    On the NVIDIA H200 the pixel buffers were the faster (bench/h200_window.sh: 1.06x against
+    1.15x the bare frame at 1920x1080, medians of three), on Mesa's llvmpipe the direct one. Neither
     copies or converts the array in Python (row 0 at the top is flipped in the quad's texture
     coordinates), nor waits for the GPU."""
 
-    def __init__(self, ctx, upload: str = "direct"):
+    def __init__(self, ctx, upload: str = "pbo"):
         if upload not in ("pbo", "direct"):
             raise ValueError(f"upload={upload!r}; allowed: pbo, direct")
         self.ctx, self.upload_mode = ctx, upload
@@ -469,7 +472,7 @@ class Viewer:
     the ``on_*`` callbacks directly with synthesized events, as glfw would."""
 
     def __init__(self, scene, rt, *, window_size, quality, spp=1, frame_time=None,
-                 vsync=True, upload="direct", replay: EventLog | None = None, record=False,
+                 vsync=True, upload="pbo", replay: EventLog | None = None, record=False,
                  title="lbwater", visible=True):
         import glfw
         import moderngl
