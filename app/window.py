@@ -5,8 +5,9 @@ World.enqueue_frame / read_frame(copy=False)) into a pinned buffer, which is han
 the GL texture upload (--upload pbo: through two pixel buffers in turn), then drawn as one quad
 with the HUD over it: no host copy or conversion in Python, no GL wait per frame. Where the
 OpenCL device offers cl_khr_gl_sharing the window says so, but rendering straight into the GL
-texture is not implemented (PoCL and pip's pyopencl lack the extension, so it could not be tested
-here): the copy path is always used, and the start line and the HUD name it.
+texture is not implemented: pip's pyopencl is built without OpenCL-GL interop (have_gl() is
+False) and PoCL lacks the extension, so it could not be built or tested here; the copy path is
+always used, and the start line and the HUD name it and why.
 
 Mouse: drag on the water makes ripples where the mouse ray meets the water; Shift+drag pushes the
 water along the drag; drag elsewhere orbits; right drag pans; the wheel zooms. Keys: R rain,
@@ -150,13 +151,21 @@ def caustics_label(scene, world) -> str:
     return mode
 
 
-def display_path(rt, upload: str = "pbo") -> str:
-    """Which display path is used and why, for the HUD and the start line."""
+def display_path(rt, upload: str = "pbo", have_gl: bool | None = None) -> str:
+    """Which display path is used and why, for the HUD and the start line. ``have_gl``:
+    whether this pyopencl was built with OpenCL-GL interop (default: ``pyopencl.have_gl()``;
+    pip's wheels are built without it, so no shared path can exist there)."""
+    import pyopencl as cl
+
     how = "pixel-buffer" if upload == "pbo" else "direct"
+    copy = f"copy (2 in flight, {how} upload)"
+    if have_gl is None:
+        have_gl = bool(cl.have_gl())
+    if not have_gl:
+        return f"{copy}; this pyopencl has no OpenCL-GL interop (pyopencl.have_gl() is False)"
     if "cl_khr_gl_sharing" in rt.device.extensions.split():
-        return (f"copy (2 in flight, {how} upload); cl_khr_gl_sharing present but the "
-                "shared path is not implemented")
-    return f"copy (2 in flight, {how} upload); no cl_khr_gl_sharing on this device"
+        return f"{copy}; cl_khr_gl_sharing present but the shared path is not implemented"
+    return f"{copy}; no cl_khr_gl_sharing on this device"
 
 
 def water_of(scene, cells: int | None) -> Water | None:
