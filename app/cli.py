@@ -82,15 +82,26 @@ def _one_line(exc: BaseException) -> tuple[str, list[str]]:
     return (lines[0] if lines else type(exc).__name__), lines[1:]
 
 
+_SIGINT_SEEN = False
+
+
+def _raise_interrupt(signum, frame) -> None:
+    global _SIGINT_SEEN
+    _SIGINT_SEEN = True
+    raise KeyboardInterrupt
+
+
 def _take_over_ctrl_c() -> None:
     """Ctrl-C raises KeyboardInterrupt from here on (handled in :func:`main`, after cleanups)
-    where app.entry's handler (one line, exit now) guarded the imports."""
+    where app.entry's handler (one line, exit now) guarded the imports. The interrupt is also
+    remembered: one raised inside a C extension's import comes out as an ImportError (numpy's
+    does), which must still read as an interrupt."""
     import signal
 
     from app import entry
 
     if entry.installed():
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, _raise_interrupt)
 
 
 def _redeliver_swallowed(previous):
@@ -117,23 +128,32 @@ def main(argv: list[str] | None = None) -> int:
     previous = sys.unraisablehook
     sys.unraisablehook = _redeliver_swallowed(previous)
     try:
+        # the command modules (numpy, ...) are imported under app.entry's exit-now handler: an
+        # interrupt inside a C extension's import would otherwise surface as an ImportError
+        parser = build_parser(argv)
         _take_over_ctrl_c()
-        return _main(argv)
+        return _main(parser, argv)
     except KeyboardInterrupt:
         print("lbwater: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BaseException:
+        if _SIGINT_SEEN:   # an interrupt that came out as another exception
+            print("lbwater: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        raise
     finally:
         sys.unraisablehook = previous
 
 
-def _main(argv: list[str]) -> int:
-    parser = build_parser(argv)
+def _main(parser, argv: list[str]) -> int:
     args = parser.parse_args(argv)
     try:
         status = args._run(args)
     except KeyboardInterrupt:
         raise
     except ImportError as exc:   # no OpenCL runtime at all: pyopencl or its ICD loader missing
+        if _SIGINT_SEEN:   # an interrupt inside an extension's import
+            raise KeyboardInterrupt from None
         if (exc.name or "").split(".")[0] not in ("pyopencl", "pyvista", "vtk", "imageio"):
             raise
         msg, _ = _one_line(exc)
@@ -141,6 +161,8 @@ def _main(argv: list[str]) -> int:
               file=sys.stderr)
         return EXIT_INPUT
     except Exception as exc:
+        if _SIGINT_SEEN:
+            raise KeyboardInterrupt from None
         try:
             user = isinstance(exc, _user_errors())
         except ImportError:  # no pyopencl at all: the error itself is the message

@@ -92,8 +92,19 @@ def test_ctrl_c_is_one_line_and_status_130(tmp_path, delay):
     the parser is built, the scene read and numpy and pyopencl imported; later kernels build
     (a fresh compiler cache makes every build a real one, where an interrupt used to leave
     stray compiler lines)."""
+    returncode, lines, err = _interrupted_render(tmp_path, "app.cli", delay)
+    # 130, or killed by SIGINT (CPython re-raises the signal at exit when an interrupt hit code
+    # run by an extension's PyRun_*, even though main() caught it): a shell reports 130 for both
+    assert returncode in (130, -signal.SIGINT), err
+    assert lines == ["lbwater: interrupted"], err
+    assert not (tmp_path / "o.png").exists() and not list(tmp_path.glob("*.partial*"))
+
+
+def _interrupted_render(tmp_path, module: str, delay: float) -> tuple[int, list, str]:
+    """A 32x24 render of the pool through ``module``'s main, sent SIGINT ``delay`` s after the
+    module is imported: (exit status, stderr lines but the first-build note, stderr)."""
     env = {**ENV, "POCL_CACHE_DIR": str(tmp_path / "kcache")}
-    code = ("import sys; from app.cli import main; print('ready', file=sys.stderr, flush=True);"
+    code = (f"import sys; from {module} import main; print('ready', file=sys.stderr, flush=True);"
             f" sys.exit(main(['render', 'scenes/pool.toml', '-o', {str(tmp_path / 'o.png')!r},"
             " '--width', '32', '--height', '24']))")
     p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env,
@@ -101,13 +112,9 @@ def test_ctrl_c_is_one_line_and_status_130(tmp_path, delay):
     assert p.stderr.readline() == "ready\n"
     time.sleep(delay)
     p.send_signal(signal.SIGINT)
-    out, err = p.communicate(timeout=120)
+    _, err = p.communicate(timeout=120)
     lines = [ln for ln in err.splitlines() if not ln.startswith("lbwater: building kernels")]
-    # 130, or killed by SIGINT (CPython re-raises the signal at exit when an interrupt hit code
-    # run by an extension's PyRun_*, even though main() caught it): a shell reports 130 for both
-    assert p.returncode in (130, -signal.SIGINT), err
-    assert lines == ["lbwater: interrupted"], err
-    assert not (tmp_path / "o.png").exists() and not list(tmp_path.glob("*.partial*"))
+    return p.returncode, lines, err
 
 
 @pytest.mark.parametrize("delay", [0.0, 0.005, 0.02, 0.05, 0.15, 0.4])
@@ -115,18 +122,8 @@ def test_ctrl_c_through_the_console_entry_is_one_line_from_its_first_statement(t
     """As the ``lbwater`` console script does (``from app.entry import main``): an interrupt
     right after app.entry is imported lands in the imports of app.cli, argparse, numpy and the
     command module, or in the parser, or later: always one line and status 130."""
-    env = {**ENV, "POCL_CACHE_DIR": str(tmp_path / "kcache")}
-    code = ("import sys; from app.entry import main; print('ready', file=sys.stderr, flush=True);"
-            f" sys.exit(main(['render', 'scenes/pool.toml', '-o', {str(tmp_path / 'o.png')!r},"
-            " '--width', '32', '--height', '24']))")
-    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env,
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert p.stderr.readline() == "ready\n"
-    time.sleep(delay)
-    p.send_signal(signal.SIGINT)
-    out, err = p.communicate(timeout=120)
-    lines = [ln for ln in err.splitlines() if not ln.startswith("lbwater: building kernels")]
-    assert p.returncode in (130, -signal.SIGINT), err
+    returncode, lines, err = _interrupted_render(tmp_path, "app.entry", delay)
+    assert returncode in (130, -signal.SIGINT), err
     assert lines == ["lbwater: interrupted"], err
     assert not (tmp_path / "o.png").exists()
 
