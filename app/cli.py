@@ -124,6 +124,8 @@ def _redeliver_swallowed(previous):
 
 
 def main(argv: list[str] | None = None) -> int:
+    global _SIGINT_SEEN
+    _SIGINT_SEEN = False   # this command's interrupt, not an earlier call's in this process
     argv = list(sys.argv[1:] if argv is None else argv)
     previous = sys.unraisablehook
     sys.unraisablehook = _redeliver_swallowed(previous)
