@@ -34,14 +34,14 @@ def pond(rt):
     sc.add_instance(sc.add_mesh(V, F, material=water))
     V, F = box((-0.2, 0.3, -0.9), (1.2, 0.35, 0.1))
     sc.add_instance(sc.add_mesh(V, F, material=slab))
-    sc.add_light("directional", direction=(0.0, -0.6, 0.8), color=(2.0, 1.9, 1.8))
+    sc.add_light("directional", direction=(0.05, -0.6, 0.8), color=(2.0, 1.9, 1.8))
     return sc
 
 
 def render(rt, settings):
     sc = pond(rt)
     r = Renderer(rt, sc, settings)
-    r.set_camera((0, 1.5, 2.0), (0, 0, 0), (0, 1, 0), 60)
+    r.set_camera((0.03, 1.5, 2.0), (0, 0, 0), (0, 1, 0), 60)
     sc.scene.update()
     sc.scene.reset_trace_counts()
     r.render()
