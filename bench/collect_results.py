@@ -6,8 +6,8 @@ import sys
 from pathlib import Path
 
 
-def main() -> int:
-    root, out = Path(sys.argv[1]), Path(sys.argv[2])
+def main(argv=None) -> int:
+    root, out = (Path(a) for a in (sys.argv[1:] if argv is None else argv))
     found = {}
     for p in sorted(root.rglob("*.json")):
         try:

@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default=str(ROOT / "scenes" / "pool.toml"))
     ap.add_argument("--cells", type=int, default=1024)
@@ -25,7 +25,7 @@ def main() -> int:
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--device")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     from app.scene import load_scene
     from app.world import World

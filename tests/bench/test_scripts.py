@@ -57,3 +57,22 @@ def test_ab_embree_interleaved(capsys, rt):
     for kind in ("primary", "incoherent"):
         assert out[kind]["same_hit_fraction"] >= 0.999
         assert out[kind]["ours_Mrays_s"] > 0 and out[kind]["embree_1t_Mrays_s"] > 0
+
+
+def test_collect_results_gathers_every_json_by_relative_path(tmp_path):
+    (tmp_path / "r" / "a").mkdir(parents=True)
+    (tmp_path / "r" / "a" / "x.json").write_text('{"wall_ms": 1.5}')
+    (tmp_path / "r" / "b.json").write_text("[1, 2]")
+    (tmp_path / "r" / "bad.json").write_text("{not json")
+    assert _script("collect_results").main([str(tmp_path / "r"), str(tmp_path / "all.json")]) == 0
+    got = json.loads((tmp_path / "all.json").read_text())
+    assert got["a/x.json"] == {"wall_ms": 1.5} and got["b.json"] == [1, 2]
+    assert "unreadable" in got["bad.json"]
+
+
+def test_profile_host_prints_the_frame_and_the_top_functions(capsys, rt):
+    assert _script("profile_host").main(["--cells", "32", "--size", "32", "18", "--frames", "3",
+                                         "--top", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "3 frames" in out and "ms/frame wall under cProfile" in out
+    assert "enqueue_frame" in out or "Ordered by: internal time" in out
