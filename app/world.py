@@ -416,13 +416,19 @@ class World:
     def enqueue_frame(self, seconds: float = 0.0) -> int:
         """Queue one frame advancing the water by ``seconds``; returns its index. Waits only
         when ``frames_in_flight`` frames are already queued (for the oldest of them)."""
+        frame = self._next_frame(seconds, "frame")
+        return self._enqueue(frame, self.stages)
+
+    def _next_frame(self, seconds, what: str) -> Frame:
+        """The next frame's inputs: ``seconds`` of water (checked; ``what`` names the call in
+        the error) and the drops, pushes and boat moves queued since the last frame."""
         seconds = float(seconds)
         if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
-            raise InputError(f"frame seconds {seconds:g} is out of range; allowed [0, 3600]")
+            raise InputError(f"{what} seconds {seconds:g} is out of range; allowed [0, 3600]")
         frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes,
                       boats=self._boat_moves)
         self._drops, self._pushes, self._boat_moves = [], [], []
-        return self._enqueue(frame, self.stages)
+        return frame
 
     def _enqueue(self, frame: Frame, stages) -> int:
         """Queue ``stages`` of ``frame`` into a free slot (waiting for the oldest if none)."""
@@ -440,12 +446,7 @@ class World:
     def advance(self, seconds: float) -> None:
         """Advance the water by ``seconds`` (inputs applied) without rendering: the frame's
         index still counts, so a frame rendered afterwards is the one a run would render."""
-        seconds = float(seconds)
-        if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
-            raise InputError(f"advance seconds {seconds:g} is out of range; allowed [0, 3600]")
-        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes,
-                      boats=self._boat_moves)
-        self._drops, self._pushes, self._boat_moves = [], [], []
+        frame = self._next_frame(seconds, "advance")
         for stage in self.stages:
             if stage.name in ("inputs", "water"):
                 stage.enqueue(frame, None)
@@ -483,12 +484,7 @@ class World:
         from app import snapshot
         from lbm.structs import GUARD_DTYPE
 
-        seconds = float(seconds)
-        if not (math.isfinite(seconds) and 0 <= seconds <= 3600):
-            raise InputError(f"frame seconds {seconds:g} is out of range; allowed [0, 3600]")
-        frame = Frame(self._next, seconds, drops=self._drops, pushes=self._pushes,
-                      boats=self._boat_moves)
-        self._drops, self._pushes, self._boat_moves = [], [], []
+        frame = self._next_frame(seconds, "frame")
         traced = self._caustics is not None and self._caustics.enabled
         for stage in self.stages:   # the stages that change state; the picture's are skipped
             if stage.name in ("render", "readback") or (
