@@ -14,7 +14,9 @@ A frame is an ordered list of stages, each only enqueuing device work (no host s
     render      the wavefront Whitted frame, tonemapped to RGBA8 on the device
     readback    non-blocking copies of the RGBA8 image (or, with ``image="yuv420p"``, of its
                 yuv420p planes made on the device: kernels.video_yuv), the guard record and
-                the ray counts into this frame's slot of host arrays
+                the ray counts into this frame's slot of host arrays; the image on a second
+                queue (Runtime.copy_queue), so its copy overlaps the next frame's water and
+                BVH stages (the next render waits for it before it rewrites the image)
 
 A new stage (floating boats, caustics, a HUD) is one more object with a ``name`` and an
 ``enqueue(frame)`` method, inserted in :attr:`World.stages` where its inputs are ready.
@@ -177,6 +179,7 @@ class World:
         n = int(frames_in_flight)
         w, h = self.size
         self.image, self._yuv = None, None   # set_image: kernels.video_yuv with yuv420p
+        self._image_read: cl.Event | None = None   # the last image read (Runtime.copy_queue)
         self._rings = {"image": None,
                        "counts": PinnedRing(self.rt, 4 * STATS_LEN, np.uint32, (STATS_LEN,),
                                             slots=n)}
@@ -784,7 +787,11 @@ class _Render:
         self.world = world
 
     def enqueue(self, frame: Frame, slot: _Slot) -> None:
-        self.world.renderer.enqueue_frame(update_scene=False)
+        w = self.world
+        if w._image_read is not None:   # the last image's read (copy queue) before its rewrite
+            cl.enqueue_barrier(w.rt.queue, wait_for=[w._image_read])
+            w._image_read = None
+        w.renderer.enqueue_frame(update_scene=False)
 
 
 class _Readback:
@@ -806,5 +813,11 @@ class _Readback:
         if w._yuv is not None:
             w._yuv.enqueue(src)
             src = w._yuv.yuv
-        slot.image = rings["image"].enqueue_read(q, src)
+        # the image on the copy queue, after this frame's kernels: it overlaps the next frame's
+        # water and BVH stages, and the next render waits for it (_Render)
+        done = cl.enqueue_marker(q)
         q.flush()
+        copy = w.rt.copy_queue
+        slot.image = rings["image"].enqueue_read(copy, src, wait_for=[done])
+        w._image_read = slot.image.event
+        copy.flush()

@@ -76,12 +76,13 @@ class PinnedRing:
     def slots(self) -> int:
         return len(self._arrays)
 
-    def enqueue_read(self, queue: cl.CommandQueue, src: cl.Buffer, src_offset: int = 0
-                     ) -> ReadHandle:
-        """Queue a copy of ``src`` (from byte ``src_offset``) into the next slot; no wait."""
+    def enqueue_read(self, queue: cl.CommandQueue, src: cl.Buffer, src_offset: int = 0,
+                     wait_for=None) -> ReadHandle:
+        """Queue a copy of ``src`` (from byte ``src_offset``) into the next slot, after the
+        events ``wait_for``; no wait."""
         slot = self._next
         self._next = (slot + 1) % len(self._arrays)
         self._gens[slot] += 1
         evt = cl.enqueue_copy(queue, self._arrays[slot], src, src_offset=src_offset,
-                              is_blocking=False)
+                              is_blocking=False, wait_for=wait_for)
         return ReadHandle(evt, self, slot, self._gens[slot])

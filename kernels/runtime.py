@@ -133,7 +133,7 @@ class Runtime:
 
     def __init__(self, device: cl.Device | str | None = None, *, profiling: bool = True,
                  bvh_layout: str | None = None, kernel_arg_info: bool = True,
-                 defines: dict | None = None):
+                 defines: dict | None = None, context: cl.Context | None = None):
         """``bvh_layout``: how scenes store their BLASes for traversal, ``"binary"`` or
         ``"wide"`` (raytrace.bvh_wide); default ``LBWATER_BVH_LAYOUT`` or, unset, binary on a GPU
         and wide on a CPU. Every program is built with the matching ``TRACE_WIDE`` define unless
@@ -141,11 +141,17 @@ class Runtime:
         kernels.launch reads argument names off the device (False: from the sources, the
         fallback for devices without argument info; tests use it). ``defines``: added to every
         build (e.g. ``{"TRACE_COUNT": 1}``, the traversal work counters of kernels/traverse.h);
-        a program's own defines win."""
+        a program's own defines win. ``context``: an existing context holding the device (e.g.
+        one sharing objects with a GL context, app.gl_share); default a new one."""
         self.device = device if isinstance(device, cl.Device) else select_device(device)
-        self.context = cl.Context([self.device])
+        if context is not None and self.device.int_ptr not in [d.int_ptr for d in
+                                                               context.devices]:
+            raise ValueError(f"Runtime: the given context does not hold {self.device.name}")
+        self.context = context if context is not None else cl.Context([self.device])
         props = cl.command_queue_properties.PROFILING_ENABLE if profiling else 0
         self.queue = cl.CommandQueue(self.context, self.device, properties=props)
+        self._queue_props = props
+        self._copy_queue: cl.CommandQueue | None = None
         self.timer = StageTimer(enabled=profiling)
         self._programs: dict[tuple, cl.Program] = {}
         self._kernels: dict[tuple, cl.Kernel] = {}
@@ -246,8 +252,19 @@ class Runtime:
         """Time an event that did not come from a kernel launcher (a copy, a fill)."""
         return self.timer.record(stage, event)
 
+    @property
+    def copy_queue(self) -> cl.CommandQueue:
+        """A second in-order queue for device-to-host copies, so that frame N's image read-back
+        overlaps frame N+1's kernels (the caller orders the two queues with events)."""
+        if self._copy_queue is None:
+            self._copy_queue = cl.CommandQueue(self.context, self.device,
+                                               properties=self._queue_props)
+        return self._copy_queue
+
     def finish(self) -> None:
         self.queue.finish()
+        if self._copy_queue is not None:
+            self._copy_queue.finish()
 
     # -- buffers ----------------------------------------------------------------------------
     def buffer(self, nbytes: int, flags=cl.mem_flags.READ_WRITE) -> cl.Buffer:

@@ -16,6 +16,14 @@ def test_bench_frame_writes_stages_and_fps(tmp_path, capsys):
     assert r["lbm.step_ms"] > 0 and r["render.trace_ms"] > 0 and r["kernels_ms"] > 0
     assert (out / "bench_frame.csv").read_text().startswith("device,")
     assert "32x24 cells" in capsys.readouterr().out
+    assert r["host_copy"] is False
+
+
+def test_bench_frame_host_copy_is_recorded(tmp_path):
+    out = tmp_path / "res"
+    assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
+                 "--warmup", "1", "--frame-time", "0.1", "--host-copy", "--out", str(out)]) == 0
+    assert json.loads((out / "bench_frame.json").read_text())[0]["host_copy"] is True
 
 
 def test_bench_frame_needs_water(tmp_path, capsys):
