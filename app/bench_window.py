@@ -2,9 +2,12 @@
 (moderngl.create_standalone_context(backend="egl")) stands in for the window's.
 
 Per image size: the bare frame (World.frame: water, BVH, render, RGBA8 read-back; what
-`bench frame` times), the window's loop (two frames in flight: enqueue the next, read the oldest
-into its pinned buffer without a copy, upload that to a texture, draw the quad into a framebuffer
-of that size, glFinish), and the upload + draw alone. The goal (issue 11): the window's loop
+`bench frame` times), the window's loop (two frames in flight: enqueue the next, take the oldest
+on the window's display path, draw the quad into a framebuffer of that size, glFinish), and the
+upload + draw alone. ``--upload auto`` (as the window) takes the shared path where the device
+offers it (app.ext_share: the frame copied on the device into memory GL reads, no read-back),
+else the copy path (the oldest read into its pinned buffer without a copy, uploaded to a
+texture through pixel buffers). The goal (issue 11): the window's loop
 <= 1.1x the bare frame. Every size is checked in the same run: the drawn framebuffer must equal
 the frame's image exactly, else the run fails. Each row names the GL renderer: where EGL lists
 several devices (a GPU and Mesa's llvmpipe), ``GLCONTEXT_DEVICE_INDEX=N`` picks another one.
@@ -36,8 +39,9 @@ def add_arguments(p) -> None:
     p.add_argument("--warmup", type=int, default=5, help="untimed frames first")
     p.add_argument("--frame-time", type=float, default=1 / 60,
                    help="simulated seconds of water per frame")
-    p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
-                   help="texture upload path (default pbo, as the window)")
+    p.add_argument("--upload", choices=("auto", "shared", "pbo", "direct"), default="auto",
+                   help="display path, as the window's --upload (default auto: shared where "
+                        "available, else pbo)")
     p.add_argument("--quality", choices=("auto", "low", "medium", "high"),
                    help="sizes are windows' and the window's quality choice sets the image "
                         "(default: the image is the size, at the scene's settings)")
@@ -66,14 +70,14 @@ def run(args) -> int:
     from app.io import write_csv, write_json
     from app.quality import scaled_size
     from app.scene import load_scene
-    from app.window import Presenter, caustic_scene, display_path, make_world, parse_size
+    from app.window import Presenter, attach_display, caustic_scene, make_world, parse_size
     from kernels import get_runtime
 
     sizes = [parse_size(s, "--sizes") for s in args.sizes]
     scene = load_scene(args.scene)
     rt = get_runtime(args.device)
     ctx = _egl_context()
-    presenter = Presenter(ctx, args.upload)
+    presenter = Presenter(ctx, "direct" if args.upload == "direct" else "pbo")
     hud = Hud(ctx) if args.quality else None
     rows = []
     ft = args.frame_time
@@ -97,7 +101,8 @@ def run(args) -> int:
             t0 = time.perf_counter()
             world.frame(ft)
             bare.append(time.perf_counter() - t0)
-        # the window's loop: two frames in flight
+        # the window's loop: two frames in flight, on the window's display path
+        targets, path = attach_display(world, ctx, args.upload)
         world.enqueue_frame(ft)
         loop, upload = [], []
         for k in range(args.warmup + args.frames):
@@ -119,6 +124,8 @@ def run(args) -> int:
                 upload.append(t2 - t1)
         _, img = world.read_frame()
         presenter.upload(img)
+        if targets is not None:   # the shared frame's bytes, read back here to compare
+            img = world.renderer.read_rgba()
         shown = presenter.snapshot((w, h))
         fbo.use()
         if not np.array_equal(shown, img):
@@ -133,7 +140,8 @@ def run(args) -> int:
         row = {"device": world.device_name, "gl_renderer": ctx.info["GL_RENDERER"],
                "date": time.strftime("%Y-%m-%d"), "width": w, "height": h,
                "cells": f"{cells[0]}x{cells[1]}" if cells else "",
-               "upload": args.upload, "display_path": display_path(rt, args.upload),
+               "upload": "shared" if targets is not None else args.upload,
+               "display_path": path,
                "bare_frame_ms": bare_ms, "window_frame_ms": loop_ms,
                "ratio": round(loop_ms / bare_ms, 3),
                "upload_draw_ms": round(_median_ms(upload), 3),
@@ -150,9 +158,12 @@ def run(args) -> int:
         rows.append(row)
         print(f"{w}x{h}: bare frame {bare_ms:.2f} ms, window loop {loop_ms:.2f} ms "
               f"({row['ratio']:.2f}x), upload+draw {row['upload_draw_ms']:.2f} ms "
-              f"[{row['gl_renderer']}]", flush=True)
+              f"[{row['gl_renderer']}; {row['upload']}]", flush=True)
         fbo.release()
         world.close()
+        if targets is not None:
+            presenter.reset()
+            targets.release()
     out = Path(args.out)
     write_json(out / "bench_window.json", rows)
     write_csv(out / "bench_window.csv", rows)

@@ -1,13 +1,15 @@
 """Open an interactive window on a scene: rain, mouse ripples, an orbit camera and a HUD.
 
-Display path: each frame's RGBA8 image is read back without blocking (two frames in flight,
-World.enqueue_frame / read_frame(copy=False)) into a pinned buffer, which is handed as it is to
-the GL texture upload (--upload pbo: through two pixel buffers in turn), then drawn as one quad
-with the HUD over it: no host copy or conversion in Python, no GL wait per frame. Where the
-OpenCL device offers cl_khr_gl_sharing the window says so, but rendering straight into the GL
-texture is not implemented: pip's pyopencl is built without OpenCL-GL interop (have_gl() is
-False) and PoCL lacks the extension, so it could not be built or tested here; the copy path is
-always used, and the start line and the HUD name it and why.
+Display path (--upload, default auto): where the device offers it, the shared path
+(app.ext_share): each frame is copied on the device into memory that GL reads as a pixel buffer
+(external memory allocated by Vulkan, imported by OpenCL and GL), then into the texture: no
+read-back, no host copy. NVIDIA's OpenCL offers it (cl_khr_external_memory_opaque_fd); it has no
+cl_khr_gl_sharing, and PoCL has neither. Elsewhere the copy path: the image is read back without
+blocking (two frames in flight, World.enqueue_frame / read_frame(copy=False)) into a pinned
+buffer handed as it is to the texture upload (--upload pbo: through two pixel buffers in turn;
+direct: from the pinned buffer), no host copy or conversion in Python. Either way one quad is
+drawn with the HUD over it; the start line and the HUD name the path and, for the copy, why the
+shared one is unavailable.
 
 Mouse: drag on the water makes ripples where the mouse ray meets the water; Shift+drag pushes the
 water along the drag; drag elsewhere orbits; right drag pans; the wheel zooms. Keys: R rain,
@@ -96,10 +98,14 @@ def add_arguments(p) -> None:
     p.add_argument("--record-events", help="write the input events to this JSON-lines file")
     p.add_argument("--frame-time", type=float,
                    help="simulated seconds per frame (default: the measured frame interval)")
-    p.add_argument("--upload", choices=("pbo", "direct"), default="pbo",
-                   help="texture upload: through two pixel buffers in turn (default; the "
-                        "faster on the NVIDIA H200) or straight from the read-back buffer "
-                        "(the faster on Mesa's llvmpipe)")
+    p.add_argument("--upload", choices=UPLOADS, default="auto",
+                   help="display path: shared (OpenCL writes the GL texture's memory on the "
+                        "device through external memory, no host copy; needs "
+                        "cl_khr_external_memory_opaque_fd, GL_EXT_memory_object_fd and "
+                        "Vulkan, as on NVIDIA GPUs), pbo (read back, upload through two "
+                        "pixel buffers) or direct (read back, upload from the read-back "
+                        "buffer; the faster on Mesa's llvmpipe); auto (default): shared where "
+                        "available, else pbo. The HUD and the start line name the path and why")
     p.add_argument("--report", help="write the run's settings and FPS to this JSON file")
 
 
@@ -151,21 +157,41 @@ def caustics_label(scene, world) -> str:
     return mode
 
 
-def display_path(rt, upload: str = "pbo", have_gl: bool | None = None) -> str:
-    """Which display path is used and why, for the HUD and the start line. ``have_gl``:
-    whether this pyopencl was built with OpenCL-GL interop (default: ``pyopencl.have_gl()``;
-    pip's wheels are built without it, so no shared path can exist there)."""
-    import pyopencl as cl
+UPLOADS = ("auto", "shared", "pbo", "direct")
+SHARED_PATH = "shared (OpenCL writes GL's memory on the device: no host copy)"
 
-    how = "pixel-buffer" if upload == "pbo" else "direct"
+
+def display_path(upload: str = "pbo", shared_why_not: str | None = None) -> str:
+    """Which display path is used and why, for the HUD and the start line: the shared one
+    (``upload`` "shared", app.ext_share), or the copy with the reason the shared one is not
+    used (``shared_why_not``)."""
+    if upload == "shared":
+        return SHARED_PATH
+    how = "direct" if upload == "direct" else "pixel-buffer"
     copy = f"copy (2 in flight, {how} upload)"
-    if have_gl is None:
-        have_gl = bool(cl.have_gl())
-    if not have_gl:
-        return f"{copy}; this pyopencl has no OpenCL-GL interop (pyopencl.have_gl() is False)"
-    if "cl_khr_gl_sharing" in rt.device.extensions.split():
-        return f"{copy}; cl_khr_gl_sharing present but the shared path is not implemented"
-    return f"{copy}; no cl_khr_gl_sharing on this device"
+    return f"{copy}; shared path unavailable: {shared_why_not}" if shared_why_not else copy
+
+
+def attach_display(world, gl_ctx, upload: str, old=None):
+    """Give ``world`` the shared display path where ``upload`` allows it ("auto", "shared") and
+    the device and GL offer it; releases ``old`` targets first. Returns ``(targets or None,
+    path text)``; ``upload="shared"`` where it is unavailable is a one-line InputError."""
+    from app.ext_share import ExternalShareError, ExternalTargets
+
+    if old is not None:
+        world.set_display(None)
+        old.release()
+    if upload not in ("auto", "shared"):
+        return None, display_path(upload)
+    try:
+        targets = ExternalTargets(gl_ctx, world.rt, tuple(world.size))
+    except ExternalShareError as exc:
+        if upload == "shared":
+            raise InputError(f"--upload shared: unavailable here ({exc}); use --upload auto "
+                             "or pbo") from None
+        return None, display_path("pbo", str(exc))
+    world.set_display(targets)
+    return targets, display_path("shared")
 
 
 def water_of(scene, cells: int | None) -> Water | None:
@@ -356,22 +382,37 @@ class Presenter:
         self.uploads = 0
         self.size = None
 
-    def upload(self, img: np.ndarray) -> None:
-        """Upload ``img``, (H, W, 4) uint8, C-contiguous (else it is copied once here); its
-        bytes are consumed before this returns, so the caller may reuse the array at once."""
-        h, w = img.shape[:2]
-        if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 4:
-            raise ValueError(f"Presenter.upload: need (H, W, 4) uint8, got {img.shape} "
-                             f"{img.dtype}")
+    def _ensure_texture(self, w: int, h: int) -> None:
         if self.size != (w, h):
-            if self.texture is not None:
-                self.texture.release()
-            for pbo in self.pbos:
-                pbo.release()
+            self.reset()
             self.texture = self.ctx.texture((w, h), 4)
             self.pbos = ([self.ctx.buffer(reserve=w * h * 4, dynamic=True) for _ in range(2)]
                          if self.upload_mode == "pbo" else [])
             self.size = (w, h)
+
+    def reset(self) -> None:
+        """Release the texture and pixel buffers (made again at the next upload's size)."""
+        if self.texture is not None:
+            self.texture.release()
+        for pbo in self.pbos:
+            pbo.release()
+        self.texture, self.pbos, self.size = None, [], None
+
+    def upload(self, img) -> None:
+        """Upload ``img``, (H, W, 4) uint8, C-contiguous (else it is copied once here); its
+        bytes are consumed before this returns, so the caller may reuse the array at once.
+        ``img`` may also be a frame of the shared path (app.ext_share.SharedFrame, waited
+        for): GL then copies it into the texture on the device."""
+        if hasattr(img, "upload_into"):
+            self._ensure_texture(*img.size)
+            img.upload_into(self.texture)
+            self.uploads += 1
+            return
+        h, w = img.shape[:2]
+        if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 4:
+            raise ValueError(f"Presenter.upload: need (H, W, 4) uint8, got {img.shape} "
+                             f"{img.dtype}")
+        self._ensure_texture(w, h)
         data = img if img.flags.c_contiguous else np.ascontiguousarray(img)
         if self.upload_mode == "pbo":
             pbo = self.pbos[self.uploads % 2]
@@ -507,13 +548,15 @@ class Viewer:
         glfw.make_context_current(self.win)
         glfw.swap_interval(1 if vsync else 0)
         self.ctx = moderngl.create_context(context=_GlfwLoader(glfw))
-        self.presenter = Presenter(self.ctx, upload)
+        self.upload_mode = upload
+        self.presenter = Presenter(self.ctx, "direct" if upload == "direct" else "pbo")
+        self.targets = None   # the shared display path's (attach_display)
         from app.hud import Hud
         self.hud = Hud(self.ctx)
         self.fb_size = tuple(glfw.get_framebuffer_size(self.win))
         self._start_window = tuple(window_size)
         self.win_size = tuple(glfw.get_window_size(self.win))
-        self.path = display_path(rt, upload)
+        self.path = display_path(upload)
         if callable(quality):   # decided here, its probe frames shown as the window shows
             glfw.swap_interval(0)   # them, but not waiting for the display's refresh
             quality = quality(self)
@@ -533,6 +576,7 @@ class Viewer:
                                 cells=self.cells, caustics=quality.caustics)
         self.controls.caustics = quality.caustics   # C toggles from here; rebuilds keep it
         self.controls.reapply(self.world, camera=False)
+        self.targets, self.path = attach_display(self.world, self.ctx, upload)
         self.next_frame = 0       # index of the next frame to enqueue (event time base)
         self._size_seen = tuple(self.world.size)
         self.in_flight = 0
@@ -688,6 +732,8 @@ class Viewer:
         self.world.close()
         self.world = make_world(self.scene, self.rt, size=size, spp=c.spp, bounces=c.bounces,
                                 cells=self.cells, caustics=c.caustics)
+        self.targets, self.path = attach_display(self.world, self.ctx, self.upload_mode,
+                                                 old=self.targets)
         c.image_size = tuple(self.world.size)
         c.water = water_of(self.scene, self.cells)
         c.reapply(self.world)
@@ -837,6 +883,8 @@ class Viewer:
 
     def close(self) -> None:
         self.world.close()
+        if self.targets is not None:
+            self.targets.release()
         self.ctx.release()
         self.glfw.destroy_window(self.win)
         self.glfw.terminate()

@@ -179,6 +179,7 @@ class World:
         n = int(frames_in_flight)
         w, h = self.size
         self.image, self._yuv = None, None   # set_image: kernels.video_yuv with yuv420p
+        self._display = None   # set_display: images copied on the device to the window's GL
         self._image_read: cl.Event | None = None   # the last image read (Runtime.copy_queue)
         self._rings = {"image": None,
                        "counts": PinnedRing(self.rt, 4 * STATS_LEN, np.uint32, (STATS_LEN,),
@@ -415,6 +416,21 @@ class World:
             ring = PinnedRing(self.rt, 4 * w * h, np.uint8, (h, w, 4), slots=n)
         self._rings["image"], self.image = ring, image
 
+    def set_display(self, targets) -> None:
+        """Send the next frames' RGBA8 images to ``targets`` on the device instead of reading
+        them back (the window's shared path: app.ext_share.ExternalTargets, whose
+        ``enqueue(queue, rgba)`` queues the copy and returns a frame to ``wait()`` for);
+        :meth:`read_frame` then returns that frame. None: read back to host memory again."""
+        if targets is not None:
+            if self.image != "rgba":
+                raise ValueError("World.set_display needs image='rgba'")
+            if tuple(targets.size) != tuple(self.size):
+                raise ValueError(f"World.set_display: targets of {targets.size}, image of "
+                                 f"{self.size}")
+        if getattr(self, "_in_flight", None):
+            self.drain()
+        self._display = targets
+
     # -- the frame --------------------------------------------------------------------------
     def enqueue_frame(self, seconds: float = 0.0) -> int:
         """Queue one frame advancing the water by ``seconds``; returns its index. Waits only
@@ -461,7 +477,8 @@ class World:
         """Wait for the oldest frame in flight; its index and image: RGBA8 (height, width, 4),
         or with ``image="yuv420p"`` the flat uint8 Y, U, V planes. ``copy=False`` returns the
         pinned read-back array itself (no host copy; the window uploads it at once): its bytes
-        are this frame's only until the next :meth:`enqueue_frame` reuses the slot."""
+        are this frame's only until the next :meth:`enqueue_frame` reuses the slot. With a
+        display set (:meth:`set_display`), the image is the display's frame, on the device."""
         if not self._in_flight:
             raise InputError("read_frame: no frame in flight (call enqueue_frame first)")
         slot = self._in_flight.popleft()
@@ -591,6 +608,8 @@ class World:
         stage_ms = self._stage_ms.pop(f.index, {})
         for old in [k for k in self._stage_ms if k < f.index]:
             del self._stage_ms[old]
+        if not isinstance(rgba, np.ndarray):   # a frame of the shared display path
+            keep_image = keep_image and "view"
         img = rgba.copy() if keep_image == "copy" else rgba if keep_image else None
         self._stats = self._make_stats(slot, stage_ms, wall)
         self._free.append(slot)
@@ -810,6 +829,10 @@ class _Readback:
         if w.sim is not None:
             slot.guard = rings["guard"].enqueue_read(q, w.sim.guard_buffer)
         src = r.rgba
+        if w._display is not None:   # to the window's GL on the device: no read-back
+            slot.image = w._display.enqueue(q, src)
+            q.flush()
+            return
         if w._yuv is not None:
             w._yuv.enqueue(src)
             src = w._yuv.yuv

@@ -102,18 +102,3 @@ def test_hud_draws_text_over_the_image_only_where_it_is(ctx):
     assert top_right.max() == 0            # nothing drawn there
     assert px[-25:, -60:, :3].max() > 200  # the block anchored at the bottom-right
     fbo.release()
-
-
-def test_display_path_names_the_copy_and_why_there_is_no_shared_path(rt):
-    from app.window import display_path
-
-    no_interop = display_path(rt, "pbo", have_gl=False)
-    assert no_interop.startswith("copy (2 in flight, pixel-buffer upload)")
-    assert "have_gl() is False" in no_interop
-    with_interop = display_path(rt, "direct", have_gl=True)
-    assert "direct upload" in with_interop
-    has_ext = "cl_khr_gl_sharing" in rt.device.extensions.split()
-    assert ("not implemented" if has_ext else "no cl_khr_gl_sharing") in with_interop
-    import pyopencl as cl
-
-    assert display_path(rt) == display_path(rt, "pbo", have_gl=cl.have_gl())
