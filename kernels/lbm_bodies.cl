@@ -327,14 +327,41 @@ float lbm_hull_head(__local const LbmPressBody* l_b, const int mask,
     return d;
 }
 
-/* The cells the water a body's update reads can lie in (its footprint's samples, bilinear) and
- * the cells it can press (its box, where the last pressure lies, and the box of any pose it can
- * reach at the speed limit), from its record at the start of an update of duration t. */
-void lbm_body_reach(const LbmParams p, const float4 origin, const LbmBody* B, const float t,
-                    int4* read, int4* write)
+/* Cells whose centres may lie in world [X0, X1] x [Z0, Z1], one cell of margin, clamped. */
+int4 lbm_cells_of(const LbmParams p, const float4 origin, const float X0, const float X1,
+                  const float Z0, const float Z1)
 {
-    const float d = (float)LBM_BODY_MAX_SPEED * t + p.dx;   /* a cell of slack for rounding */
-    *read = lbm_body_box(p, origin, B->pos.x, B->pos.z, B->omega.w + d);
+    const float gx0 = (X0 - origin.x) / p.dx - 0.5f, gx1 = (X1 - origin.x) / p.dx - 0.5f;
+    const float gz0 = (Z0 - origin.z) / p.dx - 0.5f, gz1 = (Z1 - origin.z) / p.dx - 0.5f;
+    const float4 g = clamp((float4)(floor(gx0) - 1.0f, floor(gz0) - 1.0f, ceil(gx1) + 1.0f,
+                                    ceil(gz1) + 1.0f), -1.0f, (float)(max(p.nx, p.ny) + 1));
+    return clamp(convert_int4(g), (int4)(0), (int4)(p.nx - 1, p.ny - 1, p.nx - 1, p.ny - 1));
+}
+
+/* The cells the water a body's update reads can lie in (its footprint's samples, bilinear) and
+ * the cells it can press (its box, where the last pressure lies, and the bounding circle's box of
+ * any pose it can reach at the speed limit), from its record at the start of an update of n_sub
+ * substeps of dt. One substep samples at the pose of the start: the rectangle around the
+ * footprint grid (samples at heights within the sample radius); more: the sample radius's
+ * circle, widened by the reach. */
+void lbm_body_reach(const LbmParams p, const float4 origin, const LbmBody* B, const float dt,
+                    const int n_sub, int4* read, int4* write)
+{
+    const float d = (float)LBM_BODY_MAX_SPEED * dt * (float)n_sub * 1.001f;
+    if (n_sub == 1) {
+        float3 r0, r1, r2;
+        lbm_quat_rows(B->quat, &r0, &r1, &r2);
+        const float4 fp = B->foot;
+        const float3 c = (float3)(fp.x + 0.5f * (float)(B->foot_n.x - 1) * fp.z, 0.0f,
+                                  fp.y + 0.5f * (float)(B->foot_n.y - 1) * fp.w);
+        const float3 e = (float3)(0.5f * (float)(B->foot_n.x - 1) * fp.z, B->omega.w,
+                                  0.5f * (float)(B->foot_n.y - 1) * fp.w);
+        const float cx = B->pos.x + dot(r0, c), ex = dot(fabs(r0), e) * 1.001f + 1e-6f;
+        const float cz = B->pos.z + dot(r2, c), ez = dot(fabs(r2), e) * 1.001f + 1e-6f;
+        *read = lbm_cells_of(p, origin, cx - ex, cx + ex, cz - ez, cz + ez);
+    } else {
+        *read = lbm_body_box(p, origin, B->pos.x, B->pos.z, B->omega.w + d);
+    }
     const int4 c = lbm_body_box(p, origin, B->pos.x, B->pos.z, B->damping.w + d);
     *write = (int4)(min(c.x, B->box.x), min(c.y, B->box.y), max(c.z, B->box.z),
                     max(c.w, B->box.w));
@@ -380,13 +407,12 @@ void lbm_bodies_update(__global const LBM_FT* restrict f, __global float* zforce
     const int b = get_group_id(0), lid = get_local_id(0);
     if (b >= n) return;   /* uniform over the work-group */
     if (b == 0 && lid >= n && lid < LBM_MAX_BODIES) out[lid] = bodies[lid];   /* unused slots */
-    const float t = s.dt * (float)s.n_sub;
     if (lid < n) {
         const LbmBody B = bodies[lid];
         l_body[lid] = B;
         l_adj[lid] = 0;
         int4 r, w;
-        lbm_body_reach(p, s.origin, &B, t, &r, &w);
+        lbm_body_reach(p, s.origin, &B, s.dt, s.n_sub, &r, &w);
         l_read[lid] = r;
         l_write[lid] = w;
     }

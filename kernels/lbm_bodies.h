@@ -20,7 +20,7 @@
 /* Horizontal speed limit of a body, m/s (lbm/bodies.py MAX_SPEED): it bounds where a body can
  * be at the end of an update, so the update can tell from the start which bodies' cells can
  * meet (those are updated by one work-group; the others each by their own). */
-#define LBM_BODY_MAX_SPEED 10
+#define LBM_BODY_MAX_SPEED 5
 
 /* 256 bytes: one rigid body, its hull footprint and its transform row. */
 typedef struct {

@@ -41,7 +41,7 @@ BODY_WG = 512
 #: Horizontal speed limit of a boat, m/s (kernels/lbm_bodies.h LBM_BODY_MAX_SPEED): faster is
 #: clamped. It bounds where a boat can be after an update, so the update knows from the start
 #: which boats' cells can meet.
-MAX_SPEED = 10.0
+MAX_SPEED = 5.0
 RHO_WATER = 1000.0
 
 
