@@ -1,9 +1,9 @@
 """The bodies stage alone: the pool scene's water at ``--cells`` with N copies of its boat (as
 ``lbwater bench frame --boats N``), frames of 1/60 s of water, no rendering. Per frame (median
-after warm-up): ``lbm.bodies`` ms split into the bodies step and the pressure pass, bodies
-updates and launches per frame, water steps per frame; ``--every-step`` adds rows at the old
-cadence (an update after every water step) for comparison. Prints one line per row and writes
-DIR/bodies_stage.json.
+after warm-up): ``lbm.bodies`` ms (one launch per update: the bodies and their pressure
+pass), bodies updates and launches per frame, water steps per frame; ``--every-step`` adds rows
+at the old cadence (an update after every water step) for comparison. Prints one line per row
+and writes DIR/bodies_stage.json.
 
     python3 bench/bodies_stage.py --cells 1024 --boats 1 16 --frames 60 --out DIR
 """
@@ -34,7 +34,6 @@ def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
     boats = make_boats(sc, sim, bodies, rt.buffer(48 * len(bodies)), list(range(len(bodies))))
     if every_step:
         boats.max_substep = sim.dt * (1 + 1e-6)
-    boats._k_press.stage = "lbm.bodies.press"   # apart from the step kernel, here only
     per_frame = max(1, round((1 / 60) / sim.dt))
     rows = []
     for i in range(warmup + frames):
@@ -44,16 +43,14 @@ def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
         ms = rt.timer.collect()
         if i >= warmup:
             rows.append(ms)
-    step = statistics.median(r.get("lbm.bodies", 0.0) for r in rows)
-    press = statistics.median(r.get("lbm.bodies.press", 0.0) for r in rows)
+    bodies_ms = statistics.median(r.get("lbm.bodies", 0.0) for r in rows)
     updates = per_frame / boats.every
     boats.close()
     return {"device": rt.name, "cells": f"{sim.nx}x{sim.ny}", "boats": n_boats,
             "cadence": "every step" if every_step else f"every {boats.every} steps",
             "water_steps_per_frame": per_frame, "updates_per_frame": round(updates, 2),
-            "launches_per_frame": round(2 * updates, 2), "press_work_items": n_boats
-            * boats.per_body, "bodies_ms": round(step + press, 4), "step_ms": round(step, 4),
-            "press_ms": round(press, 4),
+            "launches_per_frame": round(updates, 2), "bodies_ms": round(bodies_ms, 4),
+            "ms_per_launch": round(bodies_ms / updates, 4),
             "lbm_step_ms": round(statistics.median(r.get("lbm.step", 0.0) for r in rows), 4)}
 
 
@@ -80,7 +77,7 @@ def main(argv=None) -> int:
             row = measure(rt, scene, args.cells, n, args.frames, args.warmup, every_step)
             out.append(row)
             print(f"{row['cells']} {n:2d} boats, {row['cadence']}: bodies {row['bodies_ms']:.4f}"
-                  f" ms/frame (step {row['step_ms']:.4f}, press {row['press_ms']:.4f}), "
+                  f" ms/frame ({row['ms_per_launch']:.4f} per launch), "
                   f"{row['launches_per_frame']} launches/frame, lbm.step "
                   f"{row['lbm_step_ms']:.3f} ms", flush=True)
     d = Path(args.out)

@@ -1,21 +1,27 @@
 /* Floating rigid bodies coupled both ways with the shallow water (lbm/bodies.py, docs/lbm.md).
- * One bodies update is two launches for all bodies, no host copy:
+ * One bodies update is one launch for all bodies, no host copy:
  *
- *   lbm_bodies_step       one work-group per body, all substeps in the launch: sample the water
+ *   lbm_bodies_update     one work-group per body, all substeps in the launch: sample the water
  *                         under every footprint column (bilinear head H = bed + hull pressure + h
  *                         and velocity), reduce buoyancy, drag, force and torque in local memory,
  *                         then work-item 0 integrates the rigid body (semi-implicit Euler with
- *                         added mass) and stops it at the walls; after the last substep it writes
- *                         its pose, its row of the transform buffer (world_from_mesh) and the
- *                         cell box its pressure head will cover (box; the previous one: box_old)
- *   lbm_bodies_press      per_body work-items per body, each striding over the cells of its
- *                         box and box_old (a cell in several boxes: the lowest body's; the box:
- *                         where the footprint meets the still-water plane, within the bounding
- *                         circle's box; work-groups past a body's cells return at once):
- *                         zforce = bed + the hulls' pressure head, the "bed" the step kernel's
+ *                         added mass) and stops it at the walls; after the last substep the group
+ *                         writes the pose, its row of the transform buffer (world_from_mesh) and
+ *                         the cell box its pressure head covers (box; the previous one: box_old),
+ *                         then presses: over the cells of box and box_old (the box: where the
+ *                         footprint meets the still-water plane, within the bounding circle's
+ *                         box), zforce = bed + the hulls' pressure head, the "bed" the water's
  *                         force sees, so a hull pushes water away (a wake, waves) and conserves
- *                         its volume exactly; cells of box_old that left the hull get the bed back
- *   lbm_bodies_press_all  the same over every cell (when boats are added or dropped)
+ *                         its volume exactly; cells of box_old that left the hull get the bed
+ *                         back. Bodies whose cells can meet during the update (what the water
+ *                         they read, what they press: known from the start with the speed limit
+ *                         LBM_BODY_MAX_SPEED) form a cluster that one work-group, the lowest
+ *                         body's, updates body after body then presses (a cell in several boxes:
+ *                         the lowest body's); the others return. So no cell is read by one group
+ *                         and written by another, or written twice: the result is deterministic
+ *                         with no global synchronisation. The records are read from ``bodies``
+ *                         and written to ``out`` (the host swaps them every update).
+ *   lbm_bodies_press_all  the pressure head over every cell (when boats are added or dropped)
  *
  * Hydrostatics: the pressure under a hull column whose bottom is at Y_b is rho g (H - Y_b), H the
  * water's head there; the hull presses on the water with the head d = clamp(L - Y_b, 0, Y_t - Y_b),
@@ -201,6 +207,12 @@ void lbm_body_integrate(LbmBody* body, const float3 Fh, const float3 Th, const f
     const float m = body->pos.w, dt = s.dt;
     const float added = 1.0f + body->inertia.w * fmin(1.0f, vol * s.rho / m);
     float3 v2 = vel + dt * (Fh / (m * added) - (float3)(0.0f, s.gravity / added, 0.0f));
+    /* the speed limit (horizontal): the update's clusters rely on it */
+    const float vmax = (float)LBM_BODY_MAX_SPEED, speed = hypot(v2.x, v2.z);
+    if (speed > vmax) {
+        v2.x *= vmax / speed;
+        v2.z *= vmax / speed;
+    }
     const float3 I = body->inertia.xyz;
     float3 wb = lbm_rot_t(r0, r1, r2, omega);
     const float3 tb = lbm_rot_t(r0, r1, r2, Th) - cross(wb, I * wb);
@@ -223,6 +235,12 @@ void lbm_body_integrate(LbmBody* body, const float3 Fh, const float3 Th, const f
     if (p2.y < floor_y) { p2.y = floor_y; v2.y = fmax(v2.y, 0.0f); }
     if (lo_x > hi_x) p2.x = s.origin.x + 0.5f * s.size_x;
     if (lo_z > hi_z) p2.z = s.origin.z + 0.5f * s.size_z;
+    /* a wall's push too moves it at most vmax dt (one placed outside comes in over updates) */
+    const float moved = hypot(p2.x - pos.x, p2.z - pos.z);
+    if (moved > vmax * dt) {
+        p2.x = pos.x + (p2.x - pos.x) * (vmax * dt / moved);
+        p2.z = pos.z + (p2.z - pos.z) * (vmax * dt / moved);
+    }
     const int finite = all(isfinite(p2)) && all(isfinite(v2)) && all(isfinite(w2))
                        && all(isfinite(q2));
     if (body->flags.y != 0) {   /* held: the pose stays, at rest */
@@ -241,63 +259,6 @@ void lbm_body_integrate(LbmBody* body, const float3 Fh, const float3 Th, const f
     body->torque.xyz = Th;   /* torque.w: the still-water level, set by the host */
 }
 
-/* s.n_sub substeps of s.dt for every body: one work-group per body. The water does not change
- * between substeps (it is the water of this moment); the pose does. */
-__kernel __attribute__((reqd_work_group_size(LBM_BODY_WG, 1, 1)))
-void lbm_bodies_step(__global const LBM_FT* restrict f, __global const float* restrict zforce,
-                     const LbmParams p, __global const float2* restrict foot,
-                     __global LbmBody* bodies, __global Transform* transforms,
-                     const LbmBodyStep s)
-{
-    __local float l_acc[LBM_BODY_ACC][LBM_BODY_WG];
-    __local LbmBody l_body;
-    const int b = get_group_id(0), lid = get_local_id(0);
-    if (b >= s.n_bodies) return;   /* uniform over the work-group */
-    if (lid == 0) l_body = bodies[b];
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (l_body.flags.x == 0) return;   /* uniform */
-    for (int sub = 0; sub < s.n_sub; ++sub) {
-        const LbmBody body = l_body;
-        float acc[LBM_BODY_ACC];
-        for (int k = 0; k < LBM_BODY_ACC; ++k) acc[k] = 0.0f;
-        lbm_body_columns(f, zforce, p, foot, &body, s, lid, acc);
-        for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] = acc[k];
-        barrier(CLK_LOCAL_MEM_FENCE);
-        for (int w = LBM_BODY_WG / 2; w > 0; w >>= 1) {
-            if (lid < w) {
-                for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] += l_acc[k][lid + w];
-            }
-            barrier(CLK_LOCAL_MEM_FENCE);
-        }
-        if (lid == 0) {
-            LbmBody next = body;
-            lbm_body_integrate(&next, (float3)(l_acc[0][0], l_acc[1][0], l_acc[2][0]),
-                               (float3)(l_acc[3][0], l_acc[4][0], l_acc[5][0]), l_acc[6][0],
-                               s);
-            l_body = next;
-        }
-        barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid != 0) return;
-    LbmBody body = l_body;
-    body.box_old = body.box;
-    body.box = lbm_body_press_box(p, s.origin, &body);
-    bodies[b] = body;
-
-    /* world_from_mesh = [R | pos] . body_from_mesh */
-    float3 r0, r1, r2;
-    lbm_quat_rows(body.quat, &r0, &r1, &r2);
-    const float3 c0 = (float3)(body.base_r0.x, body.base_r1.x, body.base_r2.x);
-    const float3 c1 = (float3)(body.base_r0.y, body.base_r1.y, body.base_r2.y);
-    const float3 c2 = (float3)(body.base_r0.z, body.base_r1.z, body.base_r2.z);
-    const float3 c3 = (float3)(body.base_r0.w, body.base_r1.w, body.base_r2.w);
-    Transform t;
-    t.r0 = (float4)(dot(r0, c0), dot(r0, c1), dot(r0, c2), dot(r0, c3) + body.pos.x);
-    t.r1 = (float4)(dot(r1, c0), dot(r1, c1), dot(r1, c2), dot(r1, c3) + body.pos.y);
-    t.r2 = (float4)(dot(r2, c0), dot(r2, c1), dot(r2, c2), dot(r2, c3) + body.pos.z);
-    transforms[body.foot_n.w] = t;
-}
-
 /* What the pressure kernels need of a body, staged in local memory once per work-group. */
 typedef struct {
     float4 pos;        /* centre of mass, m; w: bounding radius, m */
@@ -307,7 +268,7 @@ typedef struct {
 } LbmPressBody;
 
 /* Stage body *src in *dst (built in private memory, then copied). */
-void lbm_press_body(__local LbmPressBody* dst, __global const LbmBody* src)
+void lbm_press_body(__local LbmPressBody* dst, const LbmBody* src)
 {
     const LbmBody B = *src;
     float3 r0, r1, r2;
@@ -366,57 +327,192 @@ float lbm_hull_head(__local const LbmPressBody* l_b, const int mask,
     return d;
 }
 
-/* zforce = bed + the hulls' pressure head over the cells of each body's box and box_old (its
- * previous box: cells the hull left get the bed back). 1D launch in work-groups of
- * LBM_PRESS_WG: per_body work-items (a multiple of LBM_PRESS_WG) for body b = gid / per_body,
- * striding over its cells; a work-group past its body's cells stages and writes nothing. A cell in
- * several bodies' cells is the lowest body's. A work-group stages only the bodies whose box
- * meets its body's cells (the others press nothing there). */
-__kernel __attribute__((reqd_work_group_size(LBM_PRESS_WG, 1, 1)))
-void lbm_bodies_press(__global const float* restrict bed, __global float* zforce,
-                      const LbmParams p, __global const float2* restrict foot,
-                      __global const LbmBody* restrict bodies, const LbmBodyStep s,
-                      const int per_body)
+/* Cells whose centres may lie in world [X0, X1] x [Z0, Z1], one cell of margin, clamped. */
+int4 lbm_cells_of(const LbmParams p, const float4 origin, const float X0, const float X1,
+                  const float Z0, const float Z1)
 {
+    const float gx0 = (X0 - origin.x) / p.dx - 0.5f, gx1 = (X1 - origin.x) / p.dx - 0.5f;
+    const float gz0 = (Z0 - origin.z) / p.dx - 0.5f, gz1 = (Z1 - origin.z) / p.dx - 0.5f;
+    const float4 g = clamp((float4)(floor(gx0) - 1.0f, floor(gz0) - 1.0f, ceil(gx1) + 1.0f,
+                                    ceil(gz1) + 1.0f), -1.0f, (float)(max(p.nx, p.ny) + 1));
+    return clamp(convert_int4(g), (int4)(0), (int4)(p.nx - 1, p.ny - 1, p.nx - 1, p.ny - 1));
+}
+
+/* The cells the water a body's update reads can lie in (its footprint's samples, bilinear) and
+ * the cells it can press (its box, where the last pressure lies, and the bounding circle's box of
+ * any pose it can reach at the speed limit), from its record at the start of an update of n_sub
+ * substeps of dt. One substep samples at the pose of the start: the rectangle around the
+ * footprint grid (samples at heights within the sample radius); more: the sample radius's
+ * circle, widened by the reach. */
+void lbm_body_reach(const LbmParams p, const float4 origin, const LbmBody* B, const float dt,
+                    const int n_sub, int4* read, int4* write)
+{
+    const float d = (float)LBM_BODY_MAX_SPEED * dt * (float)n_sub * 1.001f;
+    if (n_sub == 1) {
+        float3 r0, r1, r2;
+        lbm_quat_rows(B->quat, &r0, &r1, &r2);
+        const float4 fp = B->foot;
+        const float3 c = (float3)(fp.x + 0.5f * (float)(B->foot_n.x - 1) * fp.z, 0.0f,
+                                  fp.y + 0.5f * (float)(B->foot_n.y - 1) * fp.w);
+        const float3 e = (float3)(0.5f * (float)(B->foot_n.x - 1) * fp.z, B->omega.w,
+                                  0.5f * (float)(B->foot_n.y - 1) * fp.w);
+        const float cx = B->pos.x + dot(r0, c), ex = dot(fabs(r0), e) * 1.001f + 1e-6f;
+        const float cz = B->pos.z + dot(r2, c), ez = dot(fabs(r2), e) * 1.001f + 1e-6f;
+        *read = lbm_cells_of(p, origin, cx - ex, cx + ex, cz - ez, cz + ez);
+    } else {
+        *read = lbm_body_box(p, origin, B->pos.x, B->pos.z, B->omega.w + d);
+    }
+    const int4 c = lbm_body_box(p, origin, B->pos.x, B->pos.z, B->damping.w + d);
+    *write = (int4)(min(c.x, B->box.x), min(c.y, B->box.y), max(c.z, B->box.z),
+                    max(c.w, B->box.w));
+}
+
+/* world_from_mesh = [R | pos] . body_from_mesh of ``body`` into transform row foot_n.w. */
+void lbm_body_transform(const LbmBody* body, __global Transform* transforms)
+{
+    float3 r0, r1, r2;
+    lbm_quat_rows(body->quat, &r0, &r1, &r2);
+    const float3 c0 = (float3)(body->base_r0.x, body->base_r1.x, body->base_r2.x);
+    const float3 c1 = (float3)(body->base_r0.y, body->base_r1.y, body->base_r2.y);
+    const float3 c2 = (float3)(body->base_r0.z, body->base_r1.z, body->base_r2.z);
+    const float3 c3 = (float3)(body->base_r0.w, body->base_r1.w, body->base_r2.w);
+    Transform t;
+    t.r0 = (float4)(dot(r0, c0), dot(r0, c1), dot(r0, c2), dot(r0, c3) + body->pos.x);
+    t.r1 = (float4)(dot(r1, c0), dot(r1, c1), dot(r1, c2), dot(r1, c3) + body->pos.y);
+    t.r2 = (float4)(dot(r2, c0), dot(r2, c1), dot(r2, c2), dot(r2, c3) + body->pos.z);
+    transforms[body->foot_n.w] = t;
+}
+
+/* One bodies update: s.n_sub substeps of s.dt for every body, then its pressure head. One
+ * work-group per body (slot); the water does not change between substeps (it is the water of
+ * this moment), the pose does. Records are read from ``bodies``, written to ``out`` (every slot
+ * up to LBM_MAX_BODIES). A group first finds its body's cluster (the bodies whose reach meets,
+ * transitively, all from the records at the start); the lowest body's group updates the whole
+ * cluster and presses its boxes, the others return. */
+__kernel __attribute__((reqd_work_group_size(LBM_BODY_WG, 1, 1)))
+void lbm_bodies_update(__global const LBM_FT* restrict f, __global float* zforce,
+                       __global const float* restrict bed, const LbmParams p,
+                       __global const float2* restrict foot,
+                       __global const LbmBody* restrict bodies, __global LbmBody* restrict out,
+                       __global Transform* transforms, const LbmBodyStep s)
+{
+    __local float l_acc[LBM_BODY_ACC][LBM_BODY_WG];
+    __local float l_part[LBM_BODY_ACC][LBM_BODY_PARTS];
+    __local LbmBody l_body[LBM_MAX_BODIES];
     __local LbmPressBody l_b[LBM_MAX_BODIES];
-    __local int l_near, l_lower;
+    __local int4 l_read[LBM_MAX_BODIES], l_write[LBM_MAX_BODIES];
+    __local int l_adj[LBM_MAX_BODIES];
+    __local int l_cluster;
     const int n = min(s.n_bodies, LBM_MAX_BODIES);
-    const int lid = get_local_id(0), g0 = get_group_id(0) * LBM_PRESS_WG;
-    const int b = g0 / per_body, k0 = g0 - b * per_body + lid;
-    /* every work-item reaches the barriers (PoCL needs it); groups with no cell stage nothing */
-    int4 box = (int4)(0, 0, -1, -1);
-    if (b < n && bodies[b].flags.x != 0) box = lbm_press_cells(bodies[b].box, bodies[b].box_old);
-    const int w = box.z - box.x + 1, area = w * (box.w - box.y + 1);
-    const int go = k0 - lid < area;   /* uniform: the group has a cell */
+    const int b = get_group_id(0), lid = get_local_id(0);
+    if (b >= n) return;   /* uniform over the work-group */
+    if (b == 0 && lid >= n && lid < LBM_MAX_BODIES) out[lid] = bodies[lid];   /* unused slots */
+    if (lid < n) {
+        const LbmBody B = bodies[lid];
+        l_body[lid] = B;
+        l_adj[lid] = 0;
+        int4 r, w;
+        lbm_body_reach(p, s.origin, &B, s.dt, s.n_sub, &r, &w);
+        l_read[lid] = r;
+        l_write[lid] = w;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (l_body[b].flags.x == 0) {   /* uniform: an empty slot is copied */
+        if (lid == 0) out[b] = l_body[b];
+        return;
+    }
+    /* pairs (a, c) of active bodies whose reads and presses can meet */
+    if (lid < n * n) {
+        const int a = lid / n, c = lid - a * n;
+        if (a != c && l_body[a].flags.x != 0 && l_body[c].flags.x != 0
+            && (lbm_boxes_meet(l_write[a], l_write[c]) || lbm_boxes_meet(l_read[a], l_write[c])
+                || lbm_boxes_meet(l_write[a], l_read[c])))
+            atomic_or(&l_adj[a], 1 << c);
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
     if (lid == 0) {
-        l_near = 0;
-        l_lower = 0;
+        int cluster = 1 << b, grown = cluster;
+        do {
+            cluster = grown;
+            for (int m = cluster; m != 0; m &= m - 1) grown |= l_adj[31 - clz(m & -m)];
+        } while (grown != cluster);
+        l_cluster = cluster;
     }
     barrier(CLK_LOCAL_MEM_FENCE);
-    for (int o = lid; go && o < n; o += LBM_PRESS_WG) {
-        if (bodies[o].flags.x == 0) continue;
-        if (o < b && lbm_boxes_meet(box, lbm_press_cells(bodies[o].box, bodies[o].box_old)))
-            atomic_or(&l_lower, 1 << o);
-        if (lbm_boxes_meet(box, bodies[o].box)) {
-            lbm_press_body(&l_b[o], &bodies[o]);
-            atomic_or(&l_near, 1 << o);
+    const int cluster = l_cluster;
+    if ((cluster & -cluster) != (1 << b)) return;   /* uniform: the lowest body's group works */
+
+    for (int mm = cluster; mm != 0; mm &= mm - 1) {
+        const int m = 31 - clz(mm & -mm);
+        for (int sub = 0; sub < s.n_sub; ++sub) {
+            const LbmBody body = l_body[m];
+            float acc[LBM_BODY_ACC];
+            for (int k = 0; k < LBM_BODY_ACC; ++k) acc[k] = 0.0f;
+            lbm_body_columns(f, zforce, p, foot, &body, s, lid, acc);
+            for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] = acc[k];
+            barrier(CLK_LOCAL_MEM_FENCE);
+            /* LBM_BODY_PARTS partial sums per accumulator, each over a fixed stride */
+            if (lid < LBM_BODY_ACC * LBM_BODY_PARTS) {
+                const int k = lid / LBM_BODY_PARTS, g = lid - k * LBM_BODY_PARTS;
+                float sum = 0.0f;
+                for (int i = g; i < LBM_BODY_WG; i += LBM_BODY_PARTS) sum += l_acc[k][i];
+                l_part[k][g] = sum;
+            }
+            barrier(CLK_LOCAL_MEM_FENCE);
+            if (lid == 0) {
+                float tot[LBM_BODY_ACC];
+                for (int k = 0; k < LBM_BODY_ACC; ++k) {
+                    tot[k] = 0.0f;
+                    for (int g = 0; g < LBM_BODY_PARTS; ++g) tot[k] += l_part[k][g];
+                }
+                LbmBody next = body;
+                lbm_body_integrate(&next, (float3)(tot[0], tot[1], tot[2]),
+                                   (float3)(tot[3], tot[4], tot[5]), tot[6], s);
+                l_body[m] = next;
+            }
+            barrier(CLK_LOCAL_MEM_FENCE);
         }
     }
+    /* the cluster's new records, transforms and boxes; its hulls staged for the press */
+    if (lid < n && ((cluster >> lid) & 1)) {
+        LbmBody body = l_body[lid];
+        body.box_old = body.box;
+        body.box = lbm_body_press_box(p, s.origin, &body);
+        l_body[lid] = body;
+        out[lid] = body;
+        lbm_body_transform(&body, transforms);
+        lbm_press_body(&l_b[lid], &body);
+    }
     barrier(CLK_LOCAL_MEM_FENCE);
-    const int near = l_near, lower = l_lower;
-    for (int c = k0; c < area; c += per_body) {
-        const int i = box.x + c % w, j = box.y + c / w;
-        int mine = 1;
-        for (int m = lower; m != 0; m &= m - 1) {
-            const int o = 31 - clz(m & -m);
-            const int4 ob = lbm_press_cells(bodies[o].box, bodies[o].box_old);
-            if (i >= ob.x && i <= ob.z && j >= ob.y && j <= ob.w) mine = 0;
+    /* zforce = bed + the cluster's pressure head over each body's box and box_old (a cell in
+     * several: the lowest body's); no other body presses there */
+    for (int mm = cluster; mm != 0; mm &= mm - 1) {
+        const int m = 31 - clz(mm & -mm);
+        const int4 box = lbm_press_cells(l_body[m].box, l_body[m].box_old);
+        const int lower = cluster & ((1 << m) - 1);
+        const int w = box.z - box.x + 1, area = w * (box.w - box.y + 1);
+        const int di = LBM_BODY_WG % w, dj = LBM_BODY_WG / w;
+        int i = box.x + lid % w, j = box.y + lid / w;
+        for (int c = lid; c < area; c += LBM_BODY_WG) {
+            int mine = 1;
+            for (int o = lower; o != 0; o &= o - 1) {
+                const int ob = 31 - clz(o & -o);
+                const int4 oc = lbm_press_cells(l_body[ob].box, l_body[ob].box_old);
+                if (i >= oc.x && i <= oc.z && j >= oc.y && j <= oc.w) mine = 0;
+            }
+            if (mine) {
+                const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
+                const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
+                const int cell = LBM_CELL(p, i, j);
+                zforce[cell] = bed[cell] + lbm_hull_head(l_b, cluster, foot, X, Z);
+            }
+            i += di;
+            j += dj;
+            if (i > box.z) {
+                i -= w;
+                j += 1;
+            }
         }
-        if (!mine) continue;
-        const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
-        const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
-        const int cell = LBM_CELL(p, i, j);
-        zforce[cell] = bed[cell] + lbm_hull_head(l_b, near, foot, X, Z);
     }
 }
 
@@ -429,7 +525,10 @@ __kernel void lbm_bodies_press_all(__global const float* restrict bed, __global 
     const int n = min(s.n_bodies, LBM_MAX_BODIES);
     const int lid = get_local_id(0) + get_local_id(1) * get_local_size(0);
     const int ls = get_local_size(0) * get_local_size(1);
-    for (int b = lid; b < n; b += ls) lbm_press_body(&l_b[b], &bodies[b]);
+    for (int b = lid; b < n; b += ls) {
+        const LbmBody B = bodies[b];
+        lbm_press_body(&l_b[b], &B);
+    }
     barrier(CLK_LOCAL_MEM_FENCE);
     const int i = get_global_id(0), j = get_global_id(1);
     if (i >= p.nx || j >= p.ny) return;

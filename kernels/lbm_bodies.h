@@ -11,12 +11,16 @@
 
 #include "transform.h"
 
-/* Work-group size of lbm_bodies_step: one work-group per body (a power of two). */
+/* Work-group size of lbm_bodies_update: one work-group per body (a power of two). */
 #define LBM_BODY_WG 512
-/* Work-group size of lbm_bodies_press (lbm/bodies.py PRESS_WG). */
-#define LBM_PRESS_WG 64
-/* Most bodies (lbm/bodies.py MAX_BOATS): the pressure kernels stage them all in local memory. */
+/* Partial sums per accumulator in the update's reduction (LBM_BODY_WG / 32 terms each). */
+#define LBM_BODY_PARTS 16
+/* Most bodies (lbm/bodies.py MAX_BOATS): the kernels stage them all in local memory. */
 #define LBM_MAX_BODIES 16
+/* Horizontal speed limit of a body, m/s (lbm/bodies.py MAX_SPEED): it bounds where a body can
+ * be at the end of an update, so the update can tell from the start which bodies' cells can
+ * meet (those are updated by one work-group; the others each by their own). */
+#define LBM_BODY_MAX_SPEED 5
 
 /* 256 bytes: one rigid body, its hull footprint and its transform row. */
 typedef struct {
@@ -24,7 +28,9 @@ typedef struct {
     float4 quat;     /* world_from_body rotation as (w, x, y, z) in (x, y, z, w) */
     float4 vel;      /* velocity of the centre of mass, m/s; w: depth of the hull's lowest
                         point below the centre of mass at rest orientation, m (the floor) */
-    float4 omega;    /* angular velocity in world coordinates, rad/s; w: unused */
+    float4 omega;    /* angular velocity in world coordinates, rad/s; w: the largest distance
+                        of a point where a footprint column samples the water (its bottom;
+                        a ring column's centre) from the centre of mass, m */
     float4 inertia;  /* principal moments about the centre of mass (body x, y, z), kg m^2;
                         w: added mass as a fraction of the mass (and of the inertia) */
     float4 damping;  /* rates, 1/s: x heave, y drift (relative to the water), z rotation;
@@ -42,10 +48,10 @@ typedef struct {
                         presses on the water); z, w: columns, rows of the footprint
                         that are empty on each side (its ring, at least) */
     int4 box;        /* cells (i0, j0, i1, j1), inclusive, holding every cell the pressure head
-                        of the pose the next pressure pass presses can cover (the footprint
-                        where it meets the still water, within the bounding circle), one cell
-                        of margin (set by the bodies step) */
-    int4 box_old;    /* the box of the pose pressed before: the pressure pass restores it */
+                        of the pose last pressed can cover (the footprint where it meets the
+                        still water, within the bounding circle), one cell of margin (set by
+                        the bodies update) */
+    int4 box_old;    /* the box of the pose pressed before: the update restored it */
 } LbmBody;
 
 /* 48 bytes: one bodies step, by value. */
@@ -58,7 +64,7 @@ typedef struct {
     float size_x;    /* extent of the water box along world x and z, m (walls) */
     float size_z;
     float floor;     /* lowest bed height, m above origin.y: no hull goes below it */
-    int n_sub;       /* substeps of dt in one launch of lbm_bodies_step */
+    int n_sub;       /* substeps of dt in one launch of lbm_bodies_update */
 } LbmBodyStep;
 
 #endif

@@ -4,15 +4,18 @@ Host side of ``kernels/lbm_bodies.cl``. The host precomputes, once per hull, a c
 description from the closed mesh (:class:`Hull`): volume, centre of mass and principal moments of
 a uniform solid, and a footprint height map (where the hull crosses vertical lines on a small grid
 in body coordinates, ringed by empty columns that measure the water level around the hull).
-:meth:`Boats.enqueue_step` only enqueues two launches for all boats: the bodies kernel (one
-work-group per boat, every substep in the launch: buoyancy and drag from the water under every
-column, a local reduction to force and torque, then semi-implicit Euler with added mass, walls,
-and the pose written into the caller's transform buffer as world_from_mesh), then the pressure
-kernel over the cells of the hulls' boxes only (the hulls' pressure head added to the bed the
-step's force sees: the hull pushes water away, so a moving boat makes a wake and a heaving one
-makes waves; water volume is conserved exactly). Coupled to ``sim.step``, the boats are updated
-every :attr:`Boats.every` water steps, at most ``max_substep`` seconds apart (the coupling lag is
-bounded in time, not in steps). See docs/lbm.md, "Floating bodies".
+:meth:`Boats.enqueue_step` only enqueues one launch for all boats (one work-group per boat,
+every substep in the launch: buoyancy and drag from the water under every column, a local
+reduction to force and torque, then semi-implicit Euler with added mass, walls, and the pose
+written into the caller's transform buffer as world_from_mesh; then the same work-group presses
+the hull on the water over the cells of its box only: the hulls' pressure head added to the bed
+the water's force sees, so the hull pushes water away, a moving boat makes a wake and a heaving
+one makes waves; water volume is conserved exactly). Boats whose cells can meet within an
+update (known from the start: a horizontal speed limit, :data:`MAX_SPEED`) are updated by one
+work-group, so the launch needs no global synchronisation and is deterministic. Coupled to
+``sim.step``, the boats are updated every :attr:`Boats.every` water steps, at most
+``max_substep`` seconds apart (the coupling lag is bounded in time, not in steps). See
+docs/lbm.md, "Floating bodies".
 
     boats = Boats(sim, [BoatSpec(V, F, mass=100.0, position=(1, 0.55, 1))],
                   transform_buffer, rows=[3], origin=(0, 0, 0))
@@ -35,11 +38,10 @@ from lbm.structs import BODY_DTYPE, BODY_STEP_DTYPE, record
 MAX_BOATS = 16
 #: kernels/lbm_bodies.h LBM_BODY_WG.
 BODY_WG = 512
-#: Work-group size of the pressure pass (kernels/lbm_bodies.h LBM_PRESS_WG; per_body is a
-#: multiple of it, so a work-group presses for one body).
-PRESS_WG = 64
-#: Most work-items the pressure pass gives one body (its box is strided beyond that).
-PRESS_MAX_PER_BODY = 1 << 16
+#: Horizontal speed limit of a boat, m/s (kernels/lbm_bodies.h LBM_BODY_MAX_SPEED): faster is
+#: clamped. It bounds where a boat can be after an update, so the update knows from the start
+#: which boats' cells can meet.
+MAX_SPEED = 5.0
 RHO_WATER = 1000.0
 
 
@@ -205,6 +207,16 @@ class Hull:
         return 0.5 * (lo + hi)
 
     @property
+    def sample_radius(self) -> float:
+        """Largest distance (m) from the centre of mass of a point where a column samples the
+        water: a hull column's bottom, a ring column's centre (kernels/lbm_bodies.cl)."""
+        fp = self.footprint.astype(np.float64)
+        zz, xx = np.mgrid[0:fp.shape[0], 0:fp.shape[1]]
+        xs, zs = self.x0 + xx * self.dfx, self.z0 + zz * self.dfz
+        y = np.where(fp[..., 1] >= fp[..., 0], fp[..., 0], 0.0)
+        return float(np.sqrt(xs * xs + y * y + zs * zs).max()) * (1 + 1e-6)
+
+    @property
     def bottom(self) -> float:
         """Lowest point of the hull in body coordinates (m)."""
         fp = self.footprint
@@ -320,22 +332,21 @@ class Boats:
             raise ValueError("transform_buffer must be a pyopencl Buffer of Transform rows")
         self.transforms = transform_buffer
         self._zforce = sim.pressure_head_buffer()
+        # the records: an update reads one buffer and writes the other (swapped after it)
         self._bodies = self.rt.buffer(MAX_BOATS * BODY_DTYPE.itemsize)
+        self._bodies_out = self.rt.buffer(MAX_BOATS * BODY_DTYPE.itemsize)
         self._host = np.zeros(MAX_BOATS, BODY_DTYPE)
         self._hulls: list[Hull | None] = [None] * MAX_BOATS
         self.names: list[str] = []
         self._slots: list[int] = []
         self._foot = None
         defines = sim.defines
-        self._k_step = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_step",
-                                               stage="lbm.bodies", defines=defines)
-        self._k_press = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_press",
-                                                stage="lbm.bodies", defines=defines)
+        self._k_update = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_update",
+                                                 stage="lbm.bodies", defines=defines)
         self._k_press_all = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_press_all",
                                                     stage="lbm.bodies", defines=defines)
         self._held_s, self._held_steps = 0.0, 0   # water time since the last coupled update
         self._rec_key, self._rec = None, None
-        self.per_body = PRESS_WG   # pressure-pass work-items per body (set by _upload)
         self._depth = None
         self._floor = 0.0
         specs, rows = list(specs), list(rows)
@@ -430,6 +441,7 @@ class Boats:
         rec["pos"] = (*com, mass)
         rec["quat"] = quat_from_matrix(R)
         rec["vel"] = (0.0, 0.0, 0.0, -hull.bottom)
+        rec["omega"] = (0.0, 0.0, 0.0, hull.sample_radius)
         rec["inertia"] = (*moments, spec.added_mass)
         rec["damping"] = (*damping, hull.radius)
         rec["torque"] = (0.0, 0.0, 0.0, level)
@@ -440,8 +452,6 @@ class Boats:
         cols, rows = np.nonzero(full.any(0))[0], np.nonzero(full.any(1))[0]
         rec["flags"] = (1, 0, min(cols[0], full.shape[1] - 1 - cols[-1]),
                         min(rows[0], full.shape[0] - 1 - rows[-1]))
-        # the whole grid: the first pressure pass after this restores every cell once
-        rec["box"] = rec["box_old"] = (0, 0, self.sim.nx - 1, self.sim.ny - 1)
         self._host[k] = rec
         self._hulls[k] = hull
         self._slots.append(k)
@@ -469,14 +479,25 @@ class Boats:
                 self.rho * lx * ly)
             for k in self._slots:
                 self._host[k]["torque"][3] = level
+        # the whole-grid pass below leaves each hull's head within its bounding circle's box:
+        # the box the next update restores (a cell wider than the kernel's own)
+        for k in self._slots:
+            r = self._host[k]
+            r["box"] = r["box_old"] = self._circle_cells(r["pos"][0], r["pos"][2],
+                                                         r["damping"][3])
         cl.enqueue_copy(self.rt.queue, self._bodies, self._host)
         self._n = (max(self._slots) + 1) if self._slots else 0
-        # the pressure pass: enough work-items per body to cover its box at rest in one sweep
-        dx = self.sim.dx
-        side = max((math.ceil(2 * self._hulls[k].radius / dx) + 4 for k in self._slots),
-                   default=1)
-        self.per_body = min(-(-side * side // PRESS_WG) * PRESS_WG, PRESS_MAX_PER_BODY)
-        self.enqueue_press(full=True)
+        self.enqueue_press()
+
+    def _circle_cells(self, x: float, z: float, r: float) -> tuple:
+        """Cells (i0, j0, i1, j1) whose centres may lie within r of world (x, z), two cells of
+        margin, clamped to the grid (kernels/lbm_bodies.cl lbm_body_box has one)."""
+        dx, (ox, _, oz) = self.sim.dx, self.origin
+        g = [(float(x) - r - ox) / dx - 0.5, (float(z) - r - oz) / dx - 0.5,
+             (float(x) + r - ox) / dx - 0.5, (float(z) + r - oz) / dx - 0.5]
+        b = [math.floor(g[0]) - 2, math.floor(g[1]) - 2, math.ceil(g[2]) + 2, math.ceil(g[3]) + 2]
+        hi = [self.sim.nx - 1, self.sim.ny - 1] * 2
+        return tuple(int(min(max(v, 0), h)) for v, h in zip(b, hi, strict=True))
 
     def add(self, spec: BoatSpec, row: int) -> int:
         """Add a boat writing transform row ``row``; returns its index in :attr:`names`. Reads
@@ -526,34 +547,29 @@ class Boats:
 
     def enqueue_step(self, dt: float) -> cl.Event | None:
         """Advance the boats by ``dt`` seconds against the water as it is now (substeps of at
-        most ``max_substep``, all in one launch), write their transform rows, then their
-        pressure head for the next water steps. Only enqueues: two launches for all boats."""
+        most ``max_substep``), write their transform rows, then their pressure head for the
+        next water steps. Only enqueues: one launch for all boats."""
         if not (isinstance(dt, int | float | np.floating) and math.isfinite(dt) and dt >= 0):
             raise ValueError(f"enqueue_step: dt={dt!r} must be a finite number >= 0 (s)")
         if self._n == 0 or dt == 0:
             return None
         n_sub = max(1, math.ceil(dt / self.max_substep * (1 - 1e-9)))
-        self._k_step.bind(f=self.sim.populations_buffer, zforce=self._zforce,
-                          p=self.sim.params, foot=self._foot, bodies=self._bodies,
-                          transforms=self.transforms, s=self._step_record(dt / n_sub, n_sub))
-        self._k_step.launch(self._n * BODY_WG, BODY_WG)
-        return self.enqueue_press()
-
-    def enqueue_press(self, full: bool = False) -> cl.Event | None:
-        """Write the hulls' pressure head into the bed the water's force sees: over the cells
-        of the boxes the last bodies step set (the hulls' and the ones they left), or with
-        ``full`` over every cell."""
         sim = self.sim
-        args = dict(bed=sim.bed_buffer, zforce=self._zforce, p=sim.params, foot=self._foot,
-                    bodies=self._bodies, s=self._step_record(0.0))
-        if full:
-            self._k_press_all.bind(**args)
-            return self._k_press_all.launch((sim.nx, sim.ny),
-                                            (64, 1) if self.rt.is_gpu else None)
-        if self._n == 0:
-            return None
-        self._k_press.bind(per_body=self.per_body, **args)
-        return self._k_press.launch(self._n * self.per_body, PRESS_WG)
+        self._k_update.bind(f=sim.populations_buffer, zforce=self._zforce, bed=sim.bed_buffer,
+                            p=sim.params, foot=self._foot, bodies=self._bodies,
+                            out=self._bodies_out, transforms=self.transforms,
+                            s=self._step_record(dt / n_sub, n_sub))
+        event = self._k_update.launch(self._n * BODY_WG, BODY_WG)
+        self._bodies, self._bodies_out = self._bodies_out, self._bodies
+        return event
+
+    def enqueue_press(self) -> cl.Event | None:
+        """Write the hulls' pressure head into the bed the water's force sees over every cell
+        (the updates write it over the hulls' boxes only)."""
+        sim = self.sim
+        self._k_press_all.bind(bed=sim.bed_buffer, zforce=self._zforce, p=sim.params,
+                               foot=self._foot, bodies=self._bodies, s=self._step_record(0.0))
+        return self._k_press_all.launch((sim.nx, sim.ny), (64, 1) if self.rt.is_gpu else None)
 
     # -- host reads (tests, saving) -------------------------------------------------------------
     def state(self) -> np.ndarray:

@@ -133,13 +133,16 @@ def quat_mul(a, b):
                      w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
 
 
-def substep(body, F, T, vol, dt, rho=1000.0, g=9.81) -> dict:
+def substep(body, F, T, vol, dt, rho=1000.0, g=9.81, max_speed=np.inf) -> dict:
     """One semi-implicit Euler substep with added mass and rotation damping (no wall or bed
-    contact): the new body64."""
+    contact), the horizontal speed at most ``max_speed``: the new body64."""
     out = {k: v.copy() for k, v in body.items()}
     m, q = body["pos"][3], body["quat"]
     added = 1.0 + body["inertia"][3] * min(1.0, vol * rho / m)
     v2 = body["vel"][:3] + dt * (F / (m * added) - np.array([0.0, g / added, 0.0]))
+    speed = np.hypot(v2[0], v2[2])
+    if speed > max_speed:
+        v2[[0, 2]] *= max_speed / speed
     R = matrix_from_quat(q)
     inertia = body["inertia"][:3]
     wb = R.T @ body["omega"][:3]

@@ -1,7 +1,8 @@
-"""The bodies stage's cost structure on PoCL at small sizes: two launches per update for all
-boats and all substeps, a pressure pass over the hulls' boxes only (equal to the whole-grid pass,
-and to a float64 NumPy reference), substeps against a float64 reference, and coupled updates
-every k water steps (k dt <= max_substep) that behave as updates after every step."""
+"""The bodies stage's cost structure on PoCL at small sizes: one launch per update for all
+boats and all substeps, whose pressure pass covers the hulls' boxes only (equal to the
+whole-grid pass, and to a float64 NumPy reference), substeps against a float64 reference, the
+same bytes on a rerun, and coupled updates every k water steps (k dt <= max_substep) that behave
+as updates after every step."""
 
 import math
 import re
@@ -29,7 +30,7 @@ def test_header_constants_match_the_host():
     defs = dict(re.findall(r"#define (LBM_\w+) (\d+)", text))
     assert int(defs["LBM_BODY_WG"]) == lb.BODY_WG
     assert int(defs["LBM_MAX_BODIES"]) == lb.MAX_BOATS
-    assert int(defs["LBM_PRESS_WG"]) == lb.PRESS_WG
+    assert int(defs["LBM_BODY_MAX_SPEED"]) == lb.MAX_SPEED
 
 
 def _three_boats(rt, sim, coupled=False, origin=(0.0, 0.0, 0.0)):
@@ -89,7 +90,7 @@ def test_box_pass_equals_the_whole_grid_pass_as_boats_move(rt):
             boats.place(1, (0.45, 0.6, 1.15))    # the window's B key: far from where it was
         sim.step(1)
         got = boats.pressure_head()
-        boats.enqueue_press(full=True)
+        boats.enqueue_press()
         want = boats.pressure_head()
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
         st = boats.state()
@@ -164,9 +165,9 @@ def _spy(monkeypatch):
 
 @pytest.mark.parametrize("n_boats", [1, 4])
 def test_launches_per_update_do_not_grow_with_boats(rt, monkeypatch, n_boats):
-    """Coupled to 12 water steps with max_substep = 3 dt: 4 updates of exactly two launches
-    (all boats, all substeps in one), whatever the number of boats; the pressure pass launches
-    work for the hulls' boxes (< 1/4 of the cells), not the grid; five substeps are one launch."""
+    """Coupled to 12 water steps with max_substep = 3 dt: 4 updates of exactly one launch (all
+    boats, all substeps, the pressure pass in one) of one work-group per boat, whatever the
+    number of boats; five substeps are one launch."""
     sim = br.pool(rt, dx=0.025, size=(3.0, 2.0))
     V, F = br.box(0.3, 0.15, 0.2)
     specs = [BoatSpec(V, F, mass=3.0, position=(0.6 + 0.6 * k, 0.5, 1.0), mass_height=0.05)
@@ -177,15 +178,11 @@ def test_launches_per_update_do_not_grow_with_boats(rt, monkeypatch, n_boats):
     calls = _spy(monkeypatch)
     sim.step(12)
     ours = [c for c in calls if c[0].startswith("lbm_bodies")]
-    assert [c[0] for c in ours] == ["lbm_bodies_step", "lbm_bodies_press"] * 4
-    assert all(c[1] == (n_boats * lb.BODY_WG,) for c in ours[::2])
-    side = math.ceil(2 * boats.hull(0).radius / sim.dx) + 4
-    press = ours[1][1][0]
-    assert press == n_boats * boats.per_body and boats.per_body <= side * side + 63
-    assert press < sim.nx * sim.ny / 4
+    assert [c[0] for c in ours] == ["lbm_bodies_update"] * 4
+    assert all(c[1] == (n_boats * lb.BODY_WG,) for c in ours)
     calls.clear()
     boats.enqueue_step(5 * boats.max_substep)
-    assert [c[0] for c in calls] == ["lbm_bodies_step", "lbm_bodies_press"]
+    assert [c[0] for c in calls] == ["lbm_bodies_update"]
 
 
 def _settle(rt, dx, k, seconds=8.0):
@@ -252,7 +249,7 @@ def test_press_box_follows_the_footprint_not_the_circle(rt):
     for _ in range(3):
         boats.enqueue_step(sim.dt)
         got = boats.pressure_head()
-        boats.enqueue_press(full=True)
+        boats.enqueue_press()
         want = boats.pressure_head()
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
     st = boats.state()
@@ -266,5 +263,51 @@ def test_press_box_follows_the_footprint_not_the_circle(rt):
         assert np.all(box[:2] >= cb[:2]) and np.all(box[2:] <= cb[2:])
         if k < 2:   # straight: a quarter; turned 30 degrees: 3/4 (a rectangle's corners)
             assert area < (0.3, 0.8)[k] * circle, (k, area, circle)
-        # the press launches per_body work-items for a body; groups past its cells idle
-        assert area < boats.per_body
+
+
+def test_speed_limit_matches_float64(rt):
+    """A boat thrown at 30 m/s horizontally (and 12 m/s down) moves at the horizontal speed
+    limit, 5 m/s, as the float64 substep with that limit; the vertical speed is not limited."""
+    sim = br.pool(rt, dx=0.1, size=(3.0, 2.0))
+    spec = BoatSpec(*br.box(0.6, 0.3, 0.4), mass=20.0, position=(1.5, 0.52, 1.0),
+                    mass_height=0.1)
+    boats = Boats(sim, [spec], rt.buffer(48), [0], coupled=False)
+    boats.set_velocity(0, (24.0, -12.0, 18.0))
+    zforce = boats.pressure_head() + sim.fields()["bed"]
+    sample = br.water_sampler(sim, zforce, sim.populations(), (0.0, 0.0, 0.0))
+    start = br.body64(boats.state()[0])
+    F, T, V = br.forces(start, boats.hull(0), sample)
+    ref = br.substep(start, F, T, V, 0.005, max_speed=5.0)
+    boats.enqueue_step(0.005)
+    got = br.body64(boats.state()[0])
+    assert math.hypot(got["vel"][0], got["vel"][2]) == pytest.approx(5.0, rel=1e-6)
+    assert got["vel"][1] < -11.0
+    np.testing.assert_allclose(got["vel"][:3], ref["vel"][:3], rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(got["pos"][:3] - start["pos"][:3],
+                               ref["pos"][:3] - start["pos"][:3], rtol=1e-5, atol=1e-7)
+
+
+def test_updates_are_the_same_bytes_on_a_rerun(rt):
+    """One boat alone (its own work-group) and two whose boxes overlap (one work-group for both,
+    a cluster), coupled for 30 water steps with the lone one thrown across the pool: records,
+    transform rows, pressure head and water are the same bytes on a rerun, and the box pass
+    left what a whole-grid pass leaves."""
+    def once():
+        sim = br.pool(rt, dx=0.05, size=(4.0, 1.5), drag=0.0)
+        V, F = br.box(0.5, 0.3, 0.3)
+        specs = [BoatSpec(V, F, mass=12.0, position=p, mass_height=0.08)
+                 for p in ((0.6, 0.52, 0.75), (3.0, 0.52, 0.6), (3.2, 0.52, 0.95))]
+        T = rt.buffer(48 * 3)
+        boats = Boats(sim, specs, T, [0, 1, 2])
+        boats.set_velocity(0, (3.0, 0.0, 0.2))
+        boats.set_velocity(2, (-0.5, 0.0, 0.0))
+        sim.step(30)
+        st = boats.state()
+        head = boats.pressure_head()
+        boats.enqueue_press()
+        np.testing.assert_allclose(head, boats.pressure_head(), rtol=0, atol=1e-6)
+        assert (st["box"][1, 2] >= st["box"][2, 0]) and st["pos"][0, 0] > 1.2
+        return (st.tobytes(), rt.to_host(T, np.float32, 36).tobytes(), head.tobytes(),
+                sim.populations().tobytes())
+
+    assert once() == once()
