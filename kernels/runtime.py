@@ -21,6 +21,7 @@ import numpy as np
 import pyopencl as cl
 
 from kernels.device import cl_std_option, select_device
+from kernels.events import EventKeeper
 from kernels.timing import StageTimer
 
 KERNEL_DIR = Path(__file__).resolve().parent
@@ -147,6 +148,7 @@ class Runtime:
         props = cl.command_queue_properties.PROFILING_ENABLE if profiling else 0
         self.queue = cl.CommandQueue(self.context, self.device, properties=props)
         self.timer = StageTimer(enabled=profiling)
+        self.held = EventKeeper()  # copies to/from host memory, kept until done (no wait)
         self._programs: dict[tuple, cl.Program] = {}
         self._kernels: dict[tuple, cl.Kernel] = {}
         self._kernel_args: dict[tuple, tuple] = {}
@@ -243,11 +245,20 @@ class Runtime:
         return Kernel(self, source, name, stage=stage, defines=defines)
 
     def record(self, stage: str, event: cl.Event) -> cl.Event:
-        """Time an event that did not come from a kernel launcher (a copy, a fill)."""
+        """Time an event that did not come from a kernel launcher (a copy, a fill); with the
+        timer off, hold it until done instead (:meth:`keep`)."""
+        if not self.timer.enabled:
+            return self.held.keep(event)
         return self.timer.record(stage, event)
+
+    def keep(self, event: cl.Event) -> cl.Event:
+        """Hold a copy's event until it completes (kernels.events: releasing a pyopencl
+        NannyEvent waits for its copy); returns it."""
+        return self.held.keep(event)
 
     def finish(self) -> None:
         self.queue.finish()
+        self.held.clear()
 
     # -- buffers ----------------------------------------------------------------------------
     def buffer(self, nbytes: int, flags=cl.mem_flags.READ_WRITE) -> cl.Buffer:

@@ -477,6 +477,8 @@ class ShallowWater:
                                h_ckpt=self._h_ckpt, mark=self._mark.current, p=p,
                                guard=self._guard).launch(self.n_cells,
                                                          256 if rt.is_gpu else None)
+        if self._guard_evt is not None:  # released, it would wait for its read: kept
+            rt.keep(self._guard_evt)
         self._guard_evt = cl.enqueue_copy(rt.queue, self._guard_host, self._guard,
                                           is_blocking=False)
         self._since_check = 0
@@ -636,8 +638,8 @@ class ShallowWater:
                              f"float32 values, got {eta.size} {eta.dtype}")
         if self._eta is None:
             self._eta = self.rt.buffer(4 * self.n_cells)
-        cl.enqueue_copy(self.rt.queue, self._eta, np.ascontiguousarray(eta).ravel(),
-                        is_blocking=False)
+        self.rt.keep(cl.enqueue_copy(self.rt.queue, self._eta,
+                                     np.ascontiguousarray(eta).ravel(), is_blocking=False))
         return self._enqueue_mesh(vertices_buf, normals_buf, origin4)
 
     def _check_surface_args(self, vertices_buf, normals_buf, origin) -> np.ndarray:

@@ -433,6 +433,9 @@ class Renderer:
                     g.enqueue(scatter_size, ls)
                     g.bind(gp=gather_finish)
                     g.enqueue(pixel_size, ls)
+        old = self._stats_handle
+        if old is not None:  # its event waits for the read when released: kept until done
+            self.rt.keep(old.event)
         self._stats_handle = self.enqueue_read_stats()
 
     def _count_hint(self) -> tuple | None:
@@ -455,10 +458,13 @@ class Renderer:
         prm = self._params_rec.tobytes()
         old_cam, old_prm = self._uploaded
         q = self.rt.queue
+        keep = self.rt.keep  # released at once, a copy's event would wait for the copy
         if cam != old_cam:
-            cl.enqueue_copy(q, self.camera_buf, np.frombuffer(cam, np.uint8), is_blocking=False)
+            keep(cl.enqueue_copy(q, self.camera_buf, np.frombuffer(cam, np.uint8),
+                                 is_blocking=False))
         if prm != old_prm:
-            cl.enqueue_copy(q, self.params_buf, np.frombuffer(prm, np.uint8), is_blocking=False)
+            keep(cl.enqueue_copy(q, self.params_buf, np.frombuffer(prm, np.uint8),
+                                 is_blocking=False))
         self._uploaded = (cam, prm)
 
     # -- non-blocking reads -------------------------------------------------------------------
