@@ -56,6 +56,43 @@ def _holder(rt, seconds: float):
     return lambda buf=buf: cl.enqueue_nd_range_kernel(rt.queue, k, (1,), (1,))  # buf: alive
 
 
+class _Shims:
+    """Times pyopencl's C entry points of the frame (launch, copy, set_arg, flush, event
+    queries), so the host's Python cost is the rest."""
+
+    FUNCS = ("enqueue_nd_range_kernel", "enqueue_copy")
+    METHODS = (("Kernel", "set_arg"), ("CommandQueue", "flush"),
+               ("Event", "get_profiling_info"), ("Event", "wait"))
+
+    def __init__(self):
+        import pyopencl as cl
+
+        self.seconds, self.calls, self.on = 0.0, 0, False
+        for name in self.FUNCS:
+            setattr(cl, name, self._wrap(getattr(cl, name)))
+        for cls, name in self.METHODS:
+            setattr(getattr(cl, cls), name, self._wrap(getattr(getattr(cl, cls), name)))
+
+    def _wrap(self, f):
+        clock = time.perf_counter
+
+        def shim(*a, **k):
+            if not self.on:
+                return f(*a, **k)
+            t = clock()
+            try:
+                return f(*a, **k)
+            finally:
+                self.seconds += clock() - t
+                self.calls += 1
+        return shim
+
+    def take(self) -> tuple[float, int]:
+        out = (self.seconds, self.calls)
+        self.seconds, self.calls = 0.0, 0
+        return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default=str(ROOT / "scenes" / "pool.toml"))
@@ -68,7 +105,11 @@ def main(argv=None) -> int:
     ap.add_argument("--hold-ms", type=float, default=60.0,
                     help="hold the device this long at each measured enqueue (0: off)")
     ap.add_argument("--device")
+    ap.add_argument("--split", action="store_true",
+                    help="also time pyopencl's C calls (launch, copy, set_arg, flush, event "
+                         "queries): enqueue_py_ms and read_py_ms are the rest, Python's own")
     args = ap.parse_args(argv)
+    shims = _Shims() if args.split else None
 
     global _COMPLETE
     import pyopencl as cl
@@ -90,20 +131,33 @@ def main(argv=None) -> int:
         world.frame(seconds)
     rt = world.rt
     hold = _holder(rt, args.hold_ms * 1e-3) if args.hold_ms > 0 else None
-    enq, read, events, waits = [], [], [], 0
+    enq, read, events, waits, enq_c, read_c, ncalls = [], [], [], 0, [], [], []
     for _ in range(args.frames):
         world.drain()
         rt.finish()
         held = hold() if hold is not None else None
+        if shims:
+            shims.on = True
+            shims.take()
         t0 = time.perf_counter()
         world.enqueue_frame(seconds)
         t1 = time.perf_counter()
+        if shims:
+            c, n = shims.take()
+            enq_c.append(c)
+            ncalls.append(n)
+            shims.on = False
         waits += held is not None and held.command_execution_status == _COMPLETE
         events.append(rt.timer.pending())
         rt.finish()
+        if shims:
+            shims.on = True
         t2 = time.perf_counter()
         world.read_frame(copy=False)
         t3 = time.perf_counter()
+        if shims:
+            read_c.append(shims.take()[0])
+            shims.on = False
         enq.append(t1 - t0)
         read.append(t3 - t2)
     inside = []
@@ -125,6 +179,16 @@ def main(argv=None) -> int:
            "pipelined_wall_ms": round(wall * 1e3, 3),
            "pipelined_enqueue_ms": round(statistics.median(inside) * 1e3, 3),
            "kernel_ms": round(st.kernel_ms, 3)}
+    out["enqueue_min_ms"] = round(min(enq) * 1e3, 3)   # the least disturbed frame
+    out["read_min_ms"] = round(min(read) * 1e3, 3)
+    if shims:
+        py_enq = [a - b for a, b in zip(enq, enq_c, strict=True)]
+        py_read = [a - b for a, b in zip(read, read_c, strict=True)]
+        out["enqueue_cl_calls"] = statistics.median(ncalls)
+        out["enqueue_py_ms"] = round(statistics.median(py_enq) * 1e3, 3)
+        out["enqueue_py_min_ms"] = round(min(py_enq) * 1e3, 3)
+        out["read_py_ms"] = round(statistics.median(py_read) * 1e3, 3)
+        out["read_py_min_ms"] = round(min(py_read) * 1e3, 3)
     print(json.dumps(out))
     world.close()
     return 0

@@ -166,7 +166,10 @@ class Runtime:
 
     @property
     def is_gpu(self) -> bool:
-        return bool(self.device.type & cl.device_type.GPU)
+        gpu = self.__dict__.get("_is_gpu")  # asked per launch: the device query once
+        if gpu is None:
+            gpu = self._is_gpu = bool(self.device.type & cl.device_type.GPU)
+        return gpu
 
     @property
     def is_pocl(self) -> bool:

@@ -129,6 +129,7 @@ class ShallowWater:
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or not 3 <= v <= 65536:
                 raise ValueError(f"{name}={v!r} must be an integer in [3, 65536]")
         self.nx, self.ny = int(nx), int(ny)
+        self._step_size = (self.nx, self.ny)
         self.dx = _finite("dx", dx)
         if self.dx <= 0:
             raise ValueError(f"dx={dx!r} must be > 0 (cell size in metres)")
@@ -414,7 +415,7 @@ class ShallowWater:
 
     def _enqueue_step(self) -> cl.Event:
         k = self._k_step_pair[self._parity]
-        evt = k.launch((self.nx, self.ny), self._local_size())
+        evt = k.launch(self._step_size, self._local_size())
         self._f.swap()
         self._h.swap()
         self._mark.swap()
