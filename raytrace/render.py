@@ -205,6 +205,10 @@ class Renderer:
                                            stage="render.raygen")
         self._k: list[dict[str, Kernel]] = []
         self._bound_sig: tuple | None = None  # the buffers the kernels were bound to
+        self._bind_version = 0                # counts rebinds (the launch plans' key)
+        self._caustic_bound: tuple | None = None  # caustics bound to the shadow kernels
+        self._plans: dict = {}                # launch plans by what they depend on
+        self._last_ops: list | None = None    # the plan of the last frame
         self._uploaded: tuple = (None, None)  # camera and params bytes on the device
         self._params_key = self._params_rec = None
         ls = s.local_size
@@ -235,7 +239,7 @@ class Renderer:
                       np.array([(0, q0, nq, 1)], GATHER_PARAMS)[0])
             self._plan.append((raygen, gather, (max(n_rays, STATS_LEN),), depths))
 
-    def _launch_sizes(self, depths: list, hint: tuple | None) -> list:
+    def _launch_sizes(self, depths: list, hint: tuple | None) -> tuple:
         """Per depth level: (rays work-items, scan size, gather size over rays, tonemap size over
         the chunk's pixels). The per-ray kernels loop with a grid stride over the device-side count,
         so any size is correct; with the last frame's counts (one chunk) a level is launched
@@ -254,7 +258,7 @@ class Renderer:
                 sizes.append(((n,), scan, (n,), (pixels,)))
             if len(self._sizes) > 64:
                 self._sizes.clear()
-            self._sizes[key] = sizes
+            sizes = self._sizes[key] = tuple(sizes)
         return sizes
 
     def set_stage_per_depth(self, on: bool = True) -> None:
@@ -284,7 +288,10 @@ class Renderer:
                 "shade": launcher("render_shade.cl", "render_shade", "render.shade"),
                 "shadow": launcher("render_shade.cl", "render_shadow", "render.shadow"),
                 "scan": launcher("render_secondary.cl", "render_scan", "render.secondary"),
-                "gather": launcher("render_frame.cl", "render_gather", "render.gather")})
+                "gather": launcher("render_frame.cl", "render_gather", "render.gather"),
+                # the same kernel for the tonemap pass after the last level: its own object,
+                # so neither changes arguments between frames
+                "finish": launcher("render_frame.cl", "render_gather", "render.gather")})
             self._bound_sig = None
         return self._k[depth]
 
@@ -321,11 +328,13 @@ class Renderer:
             k["scan"].bind(child_counts=self.child, counts=self.counts, depth=d,
                            capacity=self.capacity, block_sums=self.block_sums,
                            ticket=self.ticket, stats=self.stats)
-            k["gather"].bind(**shading, cam=self.camera_buf, **wave, hits=self.hits,
-                             child_offsets=self.child, block_sums=self.block_sums,
-                             out=self.rays[(d + 1) % 2], radiance=self.radiance,
-                             fb=self.framebuffer, rgba=self.rgba)
+            for g in (k["gather"], k["finish"]):
+                g.bind(**shading, cam=self.camera_buf, **wave, hits=self.hits,
+                       child_offsets=self.child, block_sums=self.block_sums,
+                       out=self.rays[(d + 1) % 2], radiance=self.radiance,
+                       fb=self.framebuffer, rgba=self.rgba)
         self._bound_sig = bufs
+        self._bind_version += 1
 
     # -- inputs -----------------------------------------------------------------------------
     def set_caustics(self, caustic_map: cl.Buffer | None, params=None) -> None:
@@ -391,7 +400,7 @@ class Renderer:
         frame's picture depends only on the scene and camera (per-ray kernels grid-stride over
         the device-side count: an empty level costs a few bare launches). The last frame's ray
         counts, when they have arrived, only size the launches."""
-        s, q = self.settings, self.rt.queue
+        s = self.settings
         if update_scene:
             self.scene.update()
         self._upload_inputs()
@@ -399,44 +408,93 @@ class Renderer:
         deepest = s.bounces if self.scene.has_secondary else 0
         self._levels = deepest
         self._bind(deepest)
-        ks = self._k
-        for k in ks[: deepest + 1]:  # set only when the caustics changed (bytes compared)
-            k["shadow"].bind(caustic_map=self.caustic_map, cprm=self.caustic_params)
-        ls = (s.local_size,)
-        scan_ls = (SCAN_WG,)
-        has_lights = len(self.scene.lights) > 0
-        fused = s.fuse_trace_shade
+        self._bind_caustics()
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
-        raygen = self.k_raygen
-        for rp, (gather_scatter, gather_last, gather_finish), raygen_size, depths \
-                in self._plan:
-            sizes = self._launch_sizes(depths, hint)
-            raygen.bind(rp=rp)
-            raygen.enqueue(raygen_size)
-            for depth in range(deepest + 1):
-                k = ks[depth]
-                ray_size, scan_size, scatter_size, pixel_size = sizes[depth]
-                k["trace_shade" if fused else "trace"].enqueue(ray_size, ls)
-                if depth == 0 and rp["zero_stats"]:
-                    q.flush()  # the device starts while the rest is enqueued
-                if not fused:
-                    k["shade"].enqueue(ray_size, ls)
-                if has_lights:
-                    k["shadow"].enqueue(ray_size, ls)
-                g = k["gather"]
-                if depth < deepest:
-                    k["scan"].enqueue(scan_size, scan_ls)
-                    g.bind(gp=gather_scatter)
-                    g.enqueue(scatter_size, ls)
-                else:
-                    g.bind(gp=gather_last)
-                    g.enqueue(scatter_size, ls)
-                    g.bind(gp=gather_finish)
-                    g.enqueue(pixel_size, ls)
+        sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
+        key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
+               self._bind_version)
+        ops = self._plans.get(key)
+        if ops is None:
+            if len(self._plans) >= 16:
+                self._plans.clear()
+            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2])
+        self._run(ops, rebind=len(self._plan) > 1 or ops is not self._last_ops)
+        self._last_ops = ops
         old = self._stats_handle
         if old is not None:  # its event waits for the read when released: kept until done
             self.rt.keep(old.event)
         self._stats_handle = self.enqueue_read_stats()
+
+    #: Plan steps: a launch (cl kernel, global size, local size, stage), arguments to bind
+    #: (Kernel, {name: value}; with one chunk only when the plan changes) and a flush.
+    _LAUNCH, _BIND, _FLUSH = 0, 1, 2
+
+    def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool) -> list:
+        """The frame's launches in order, sizes and arguments decided: what the per-frame loop
+        did, made once per (sizes, depth, lights, stage names, bindings)."""
+        s, ks = self.settings, self._k
+        ls, scan_ls = (s.local_size,), (SCAN_WG,)
+        ops = []
+
+        def launch(k: Kernel, gs: tuple, lsz: tuple | None) -> None:
+            if k._unbound:
+                k._check_bound()
+            ops.append((self._LAUNCH, k.kernel, gs, lsz, k.stage))
+
+        def bind(k: Kernel, **values) -> None:  # now too, so that launch() can check
+            k.bind(**values)
+            ops.append((self._BIND, k, values))
+
+        for (rp, (gather_scatter, gather_last, gather_finish), raygen_size, _), sz in zip(
+                self._plan, sizes, strict=True):
+            bind(self.k_raygen, rp=rp)
+            launch(self.k_raygen, raygen_size, None)
+            for depth in range(deepest + 1):
+                k = ks[depth]
+                ray_size, scan_size, scatter_size, pixel_size = sz[depth]
+                launch(k["trace_shade" if s.fuse_trace_shade else "trace"], ray_size, ls)
+                if depth == 0 and rp["zero_stats"]:
+                    ops.append((self._FLUSH,))  # the device starts while the rest is enqueued
+                if not s.fuse_trace_shade:
+                    launch(k["shade"], ray_size, ls)
+                if has_lights:
+                    launch(k["shadow"], ray_size, ls)
+                if depth < deepest:
+                    launch(k["scan"], scan_size, scan_ls)
+                    bind(k["gather"], gp=gather_scatter)
+                    launch(k["gather"], scatter_size, ls)
+                else:
+                    bind(k["gather"], gp=gather_last)
+                    launch(k["gather"], scatter_size, ls)
+                    bind(k["finish"], gp=gather_finish)
+                    launch(k["finish"], pixel_size, ls)
+        return ops
+
+    def _run(self, ops: list, rebind: bool) -> None:
+        """Enqueue a plan: each launch one bare enqueue, its event recorded under its stage."""
+        q, enqueue, record = self.rt.queue, cl.enqueue_nd_range_kernel, self.rt.timer.record
+        launch, bind = self._LAUNCH, self._BIND
+        for op in ops:
+            kind = op[0]
+            if kind == launch:
+                record(op[4], enqueue(q, op[1], op[2], op[3]))
+            elif kind == bind:
+                if rebind:
+                    op[1].bind(**op[2])
+            else:
+                q.flush()
+
+    def _bind_caustics(self) -> None:
+        """Bind the caustic map and its record to every level's shadow kernel when they (or the
+        kernels' bindings) changed."""
+        cmap, cprm = self.caustic_map, self.caustic_params.tobytes()
+        old = self._caustic_bound
+        if old is not None and old[0] is cmap and old[1] == cprm and \
+                old[2] == self._bind_version:
+            return
+        for k in self._k:
+            k["shadow"].bind(caustic_map=cmap, cprm=self.caustic_params)
+        self._caustic_bound = (cmap, cprm, self._bind_version)
 
     def _count_hint(self) -> tuple | None:
         """Rays per depth of the last frame whose counts have arrived (never waits)."""
