@@ -68,10 +68,15 @@ class _Shims:
         import pyopencl as cl
 
         self.seconds, self.calls, self.on = 0.0, 0, False
-        for name in self.FUNCS:
-            setattr(cl, name, self._wrap(getattr(cl, name)))
-        for cls, name in self.METHODS:
-            setattr(getattr(cl, cls), name, self._wrap(getattr(getattr(cl, cls), name)))
+        self._saved = [(cl, name, getattr(cl, name)) for name in self.FUNCS] + [
+            (getattr(cl, cls), name, getattr(getattr(cl, cls), name))
+            for cls, name in self.METHODS]
+        for owner, name, f in self._saved:
+            setattr(owner, name, self._wrap(f))
+
+    def restore(self) -> None:
+        for owner, name, f in self._saved:
+            setattr(owner, name, f)
 
     def _wrap(self, f):
         clock = time.perf_counter
@@ -110,7 +115,14 @@ def main(argv=None) -> int:
                          "queries): enqueue_py_ms and read_py_ms are the rest, Python's own")
     args = ap.parse_args(argv)
     shims = _Shims() if args.split else None
+    try:
+        return _run(args, shims)
+    finally:
+        if shims:
+            shims.restore()
 
+
+def _run(args, shims) -> int:
     global _COMPLETE
     import pyopencl as cl
 
