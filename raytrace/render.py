@@ -502,8 +502,7 @@ class Renderer:
         if h is None or not h.ready():
             return self._last_hint
         st = h.array
-        self._last_hint = tuple(int(x) for x in st[: self.settings.bounces + 1]) \
-            if h.valid else None
+        self._last_hint = tuple(st[: self.settings.bounces + 1].tolist()) if h.valid else None
         return self._last_hint
 
     def _upload_inputs(self) -> None:
@@ -548,7 +547,7 @@ class Renderer:
         """:meth:`read_stats`'s dictionary from a stats array (e.g. ``stats_handle.wait()``)."""
         st = np.asarray(counts)
         L = self._levels
-        per_depth = [int(x) for x in st[: L + 1]]
+        per_depth = st[: L + 1].tolist()
         if L == 0 and not self.scene.has_secondary:  # no scan ran: the chunks' primary rays
             per_depth = [sum(nq * self.settings.spp for _, nq in self.chunks)]
         return {"rays_per_depth": per_depth, "dropped": int(st[STAT_DROPPED]),
