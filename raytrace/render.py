@@ -16,11 +16,13 @@ the ray buffers would not fit in device memory):
 
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
 the shading). Every kernel (``kernels.launch.Kernel``) belongs to this renderer (one per depth
-level) and its arguments are bound by name when the scene's buffers change; per-launch values
-are the by-value RaygenParams/GatherParams records, so a frame is mostly bare enqueues from
-Python. Per-ray kernels loop with a grid stride over the device-side count and are launched for
-about the last arrived count (``size_hints``) rather than every slot: any size gives the same
-image.
+level; the tonemap pass has its own gather object) and its arguments are bound by name when the
+scene's buffers change; per-launch values are the by-value RaygenParams/GatherParams records.
+The frame's launches are a plan (kernel, sizes, stage; binds between them where several chunks
+need them) made once per launch sizes, depth, lights and bindings, and replayed each frame as
+bare enqueues. Per-ray kernels loop with a grid stride over the device-side count and are
+launched for about the last arrived count (``size_hints``) rather than every slot: any size
+gives the same image.
 
 Reads: :meth:`Renderer.enqueue_read_rgba` / :meth:`Renderer.enqueue_read_stats` copy into pinned
 host memory without a wait (``kernels.pinned``); ``read_*`` synchronise (tests, tools).
