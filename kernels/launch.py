@@ -253,6 +253,7 @@ class Kernel:
                     self._raw[i] = value
                 else:
                     data = self._value_bytes(arg, value)
+                    self._raw[i] = _NOTHING  # the last scalar no longer says what is set
                 if data == held[i]:
                     continue
                 k.set_arg(i, np.frombuffer(data, np.uint8))

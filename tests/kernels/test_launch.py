@@ -139,6 +139,9 @@ def test_a_record_changed_in_place_is_set_again_an_equal_scalar_is_not(rt):
     k.bind(p=recs[0], n=np.uint32(4))
     k.bind(n=True)                                    # == 1 but of another type: converted
     assert counter.calls == [0, 1, 3, 2, 4, 1, 3]
+    k.bind(n=np.array(2))                             # a 0-d array (converted) in between...
+    k.bind(n=True)                                    # ...so the equal bool is set again
+    assert counter.calls == [0, 1, 3, 2, 4, 1, 3, 3, 3]
     k.kernel = counter.kernel
     k.launch(4, 16)
     k.launch(np.array([4]), 16)                       # unhashable sizes: converted each time
