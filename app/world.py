@@ -581,7 +581,7 @@ class World:
         if eta is not None:
             w = self.water
             self.sim.write_surface_heights(eta, w.vertices, w.normals, w.origin)
-        cl.enqueue_copy(q, rs.transform_buffer, rows, is_blocking=False)
+        self.rt.keep(cl.enqueue_copy(q, rs.transform_buffer, rows, is_blocking=False))
         self.set_camera(*s.camera)
         if s.caustics != self.caustics:
             self.set_caustics(s.caustics)
@@ -590,7 +590,7 @@ class World:
             if self._caustics is None or m.size != 4 * self._caustics.n_texels:
                 raise SnapshotError(f"snapshot of another scene: caustic map of {m.size // 4} "
                                     "texels")
-            cl.enqueue_copy(q, self._caustics.map, m, is_blocking=False)
+            self.rt.keep(cl.enqueue_copy(q, self._caustics.map, m, is_blocking=False))
 
     def drain(self) -> None:
         """Complete every frame in flight (their stats become available)."""

@@ -152,6 +152,14 @@ def parse_kernel_args(source: str | Path, name: str) -> tuple[KernelArg, ...]:
 
 
 # -- the launcher ----------------------------------------------------------------------------
+#: Scalar types whose values cannot change in place (bind skips converting an equal one).
+_IMMUTABLE = frozenset({int, float, bool, np.int8, np.uint8, np.int16, np.uint16, np.int32,
+                        np.uint32, np.int64, np.uint64, np.float32, np.float64})
+_INTEGRAL = frozenset({int, bool, np.int8, np.uint8, np.int16, np.uint16, np.int32, np.uint32,
+                       np.int64, np.uint64})
+_NOTHING = object()
+
+
 def _sizes(global_size, local_size) -> tuple[tuple, tuple | None]:
     """Global size rounded up to a multiple of the local size (kernels guard their index), at
     least 1 per dimension."""
@@ -172,7 +180,7 @@ class Kernel:
     """
 
     __slots__ = ("rt", "source", "name", "stage", "kernel", "args", "_index", "_held",
-                 "_unbound", "global_size", "local_size")
+                 "_raw", "_struct", "_unbound", "global_size", "local_size", "_size_cache")
 
     def __init__(self, rt: Runtime, source: str, name: str, *, stage: str,
                  defines: dict | None = None):
@@ -189,9 +197,15 @@ class Kernel:
                                  f"device reports {self.kernel.num_args}")
         self._index = {a.name: i for i, a in enumerate(self.args)}
         self._held: list = [None] * len(self.args)
+        # the last Python/NumPy scalar bound to a value argument (immutable: the same type and
+        # value give the same bytes, so no conversion), and the struct arguments
+        self._raw: list = [_NOTHING] * len(self.args)
+        self._struct = [a.kind == VALUE and a.type_name not in SCALAR_TYPES
+                        and _VECTOR.match(a.type_name) is None for a in self.args]
         self._unbound = set(self._index)
         self.global_size: tuple | None = None
         self.local_size: tuple | None = None
+        self._size_cache: dict = {}
 
     @property
     def arg_names(self) -> list[str]:
@@ -225,7 +239,21 @@ class Kernel:
                 k.set_arg(i, value)
                 held[i] = value
             else:
-                data = self._value_bytes(arg, value)
+                tv = type(value)
+                if tv is np.void and self._struct[i]:
+                    if value.dtype.names is None:
+                        data = self._value_bytes(arg, value)
+                    else:
+                        data = value.tobytes()  # a record may have changed in place: compare
+                elif tv in _IMMUTABLE:
+                    raw = self._raw[i]
+                    if type(raw) is tv and raw == value and (value or tv in _INTEGRAL):
+                        continue  # (an equal float's bits are equal, but for 0.0 and -0.0)
+                    data = self._value_bytes(arg, value)
+                    self._raw[i] = value
+                else:
+                    data = self._value_bytes(arg, value)
+                    self._raw[i] = _NOTHING  # the last scalar no longer says what is set
                 if data == held[i]:
                     continue
                 k.set_arg(i, np.frombuffer(data, np.uint8))
@@ -314,7 +342,14 @@ class Kernel:
             return self(wait_for)
         if self._unbound:
             self._check_bound()
-        gs, ls = _sizes(global_size, local_size)
+        try:
+            gs, ls = self._size_cache[global_size, local_size]
+        except KeyError:
+            gs, ls = self._size_cache[global_size, local_size] = _sizes(global_size, local_size)
+            if len(self._size_cache) > 64:  # sizes that change every launch: stay bounded
+                self._size_cache.clear()
+        except TypeError:  # an unhashable size (a NumPy array)
+            gs, ls = _sizes(global_size, local_size)
         rt = self.rt
         evt = cl.enqueue_nd_range_kernel(rt.queue, self.kernel, gs, ls, wait_for=wait_for)
         return rt.timer.record(self.stage, evt)

@@ -21,6 +21,7 @@ import numpy as np
 import pyopencl as cl
 
 from kernels.device import cl_std_option, select_device
+from kernels.events import EventKeeper
 from kernels.timing import StageTimer
 
 KERNEL_DIR = Path(__file__).resolve().parent
@@ -142,7 +143,7 @@ class Runtime:
         fallback for devices without argument info; tests use it). ``defines``: added to every
         build (e.g. ``{"TRACE_COUNT": 1}``, the traversal work counters of kernels/traverse.h);
         a program's own defines win. ``context``: an existing context holding the device (e.g.
-        one sharing objects with a GL context, app.gl_share); default a new one."""
+        one of another library's); default a new one."""
         self.device = device if isinstance(device, cl.Device) else select_device(device)
         if context is not None and self.device.int_ptr not in [d.int_ptr for d in
                                                                context.devices]:
@@ -153,6 +154,7 @@ class Runtime:
         self._queue_props = props
         self._copy_queue: cl.CommandQueue | None = None
         self.timer = StageTimer(enabled=profiling)
+        self.held = EventKeeper()  # copies to/from host memory, kept until done (no wait)
         self._programs: dict[tuple, cl.Program] = {}
         self._kernels: dict[tuple, cl.Kernel] = {}
         self._kernel_args: dict[tuple, tuple] = {}
@@ -170,7 +172,10 @@ class Runtime:
 
     @property
     def is_gpu(self) -> bool:
-        return bool(self.device.type & cl.device_type.GPU)
+        gpu = self.__dict__.get("_is_gpu")  # asked per launch: the device query once
+        if gpu is None:
+            gpu = self._is_gpu = bool(self.device.type & cl.device_type.GPU)
+        return gpu
 
     @property
     def is_pocl(self) -> bool:
@@ -249,8 +254,16 @@ class Runtime:
         return Kernel(self, source, name, stage=stage, defines=defines)
 
     def record(self, stage: str, event: cl.Event) -> cl.Event:
-        """Time an event that did not come from a kernel launcher (a copy, a fill)."""
+        """Time an event that did not come from a kernel launcher (a copy, a fill); with the
+        timer off, hold it until done instead (:meth:`keep`)."""
+        if not self.timer.enabled:
+            return self.held.keep(event)
         return self.timer.record(stage, event)
+
+    def keep(self, event: cl.Event) -> cl.Event:
+        """Hold a copy's event until it completes (kernels.events: releasing a pyopencl
+        NannyEvent waits for its copy); returns it."""
+        return self.held.keep(event)
 
     @property
     def copy_queue(self) -> cl.CommandQueue:
@@ -265,6 +278,7 @@ class Runtime:
         self.queue.finish()
         if self._copy_queue is not None:
             self._copy_queue.finish()
+        self.held.clear()
 
     # -- buffers ----------------------------------------------------------------------------
     def buffer(self, nbytes: int, flags=cl.mem_flags.READ_WRITE) -> cl.Buffer:

@@ -16,6 +16,7 @@ from collections import deque
 import pyopencl as cl
 
 _COMPLETE = cl.command_execution_status.COMPLETE
+_START, _END = cl.profiling_info.START, cl.profiling_info.END
 
 
 class _Frame:
@@ -26,10 +27,22 @@ class _Frame:
         self.events: list[tuple[str, cl.Event]] = []
         self.folded_ms: dict[str, float] = {}
 
-    def fold(self, count: int) -> None:
-        """Wait on the oldest ``count`` events and keep only their per-stage sums."""
-        for stage, evt in self.events[:count]:
-            self.folded_ms[stage] = self.folded_ms.get(stage, 0.0) + _event_ms(evt)
+    def fold(self, count: int, done: bool = False) -> None:
+        """Keep only the per-stage sums of the oldest ``count`` events, waiting for the last of
+        them (one in-order queue: then all are complete) unless ``done`` says they are."""
+        events = self.events[:count]
+        if not events:
+            return
+        if not done:
+            events[-1][1].wait()
+        ms, get = self.folded_ms, self.folded_ms.get
+        for stage, evt in events:
+            try:
+                info = evt.get_profiling_info
+                t = (info(_END) - info(_START)) * 1e-6
+            except cl.Error:  # not complete after all (an event of another queue): wait
+                t = _event_ms(evt)
+            ms[stage] = get(stage, 0.0) + t
         del self.events[:count]
 
     def done(self) -> bool:
@@ -37,14 +50,14 @@ class _Frame:
         return not self.events or (
             self.events[-1][1].command_execution_status == _COMPLETE)
 
-    def stage_ms(self) -> dict[str, float]:
-        self.fold(len(self.events))
+    def stage_ms(self, done: bool = False) -> dict[str, float]:
+        self.fold(len(self.events), done)
         return dict(self.folded_ms)
 
 
 def _event_ms(evt: cl.Event) -> float:
     evt.wait()
-    return (evt.profile.end - evt.profile.start) * 1e-6
+    return (evt.get_profiling_info(_END) - evt.get_profiling_info(_START)) * 1e-6
 
 
 class StageTimer:
@@ -84,7 +97,7 @@ class StageTimer:
         out = []
         while self._closed and (wait or self._closed[0].done()):
             f = self._closed.popleft()
-            out.append((f.tag, f.stage_ms()))
+            out.append((f.tag, f.stage_ms(done=not wait)))
         return out
 
     def collect(self) -> dict[str, float]:

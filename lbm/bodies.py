@@ -346,7 +346,7 @@ class Boats:
         self._k_press_all = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_press_all",
                                                     stage="lbm.bodies", defines=defines)
         self._held_s, self._held_steps = 0.0, 0   # water time since the last coupled update
-        self._rec_key, self._rec = None, None
+        self._recs: dict = {}   # BodyStep records by their inputs
         self._depth = None
         self._floor = 0.0
         specs, rows = list(specs), list(rows)
@@ -522,15 +522,18 @@ class Boats:
 
     # -- per frame ------------------------------------------------------------------------------
     def _step_record(self, dt: float, n_sub: int = 1) -> np.void:
-        key = (dt, n_sub, self._n, self._floor)
-        if key != self._rec_key:
+        gravity = self.sim.lattice.gravity
+        key = (dt, n_sub, self._n, self._floor, gravity)
+        rec = self._recs.get(key)
+        if rec is None:
+            if len(self._recs) >= 8:
+                self._recs.clear()
             lx, ly = self.sim.size
-            self._rec = record(BODY_STEP_DTYPE, origin=(*self.origin, 0.0), dt=dt,
-                               gravity=self.sim.lattice.gravity, rho=self.rho,
-                               n_bodies=self._n, size_x=lx, size_z=ly, floor=self._floor,
-                               n_sub=n_sub)
-            self._rec_key = key
-        return self._rec
+            rec = self._recs[key] = record(
+                BODY_STEP_DTYPE, origin=(*self.origin, 0.0), dt=dt, gravity=gravity,
+                rho=self.rho, n_bodies=self._n, size_x=lx, size_z=ly, floor=self._floor,
+                n_sub=n_sub)
+        return rec
 
     @property
     def every(self) -> int:

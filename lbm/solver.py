@@ -129,6 +129,7 @@ class ShallowWater:
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or not 3 <= v <= 65536:
                 raise ValueError(f"{name}={v!r} must be an integer in [3, 65536]")
         self.nx, self.ny = int(nx), int(ny)
+        self._step_size = (self.nx, self.ny)
         self.dx = _finite("dx", dx)
         if self.dx <= 0:
             raise ValueError(f"dx={dx!r} must be > 0 (cell size in metres)")
@@ -414,7 +415,7 @@ class ShallowWater:
 
     def _enqueue_step(self) -> cl.Event:
         k = self._k_step_pair[self._parity]
-        evt = k.launch((self.nx, self.ny), self._local_size())
+        evt = k.launch(self._step_size, self._local_size())
         self._f.swap()
         self._h.swap()
         self._mark.swap()
@@ -477,6 +478,8 @@ class ShallowWater:
                                h_ckpt=self._h_ckpt, mark=self._mark.current, p=p,
                                guard=self._guard).launch(self.n_cells,
                                                          256 if rt.is_gpu else None)
+        if self._guard_evt is not None:  # released, it would wait for its read: kept
+            rt.keep(self._guard_evt)
         self._guard_evt = cl.enqueue_copy(rt.queue, self._guard_host, self._guard,
                                           is_blocking=False)
         self._since_check = 0
@@ -636,8 +639,8 @@ class ShallowWater:
                              f"float32 values, got {eta.size} {eta.dtype}")
         if self._eta is None:
             self._eta = self.rt.buffer(4 * self.n_cells)
-        cl.enqueue_copy(self.rt.queue, self._eta, np.ascontiguousarray(eta).ravel(),
-                        is_blocking=False)
+        self.rt.keep(cl.enqueue_copy(self.rt.queue, self._eta,
+                                     np.ascontiguousarray(eta).ravel(), is_blocking=False))
         return self._enqueue_mesh(vertices_buf, normals_buf, origin4)
 
     def _check_surface_args(self, vertices_buf, normals_buf, origin) -> np.ndarray:

@@ -159,6 +159,7 @@ class Caustics:
         self.k_photons.bind(accum=self.accum)
         self.k_filter.bind(accum=self.accum, map=self.map)
         self._history = False   # the map holds a last frame to blend with
+        self._records_key, self._records = None, None   # enqueue's records, while valid
 
     @property
     def enabled(self) -> bool:
@@ -266,18 +267,28 @@ class Caustics:
         if not self.enabled:
             return
         ls = 64
-        cp = self.params(frame)
+        cp, photons = self._frame_records()
         self.k_clear.bind(cp=cp)
         self.k_clear.launch(min(3 * self.n_texels, 1 << 20), ls)
         scene = self.scene.scene.trace_bindings()
         geom = self.scene.shade_bindings()
         n = self.grid[0] * self.grid[1]
-        for light in self.lights():
-            self.k_photons.bind(**scene, **geom, cp=self.params(frame, light))
+        for light, rec in photons:
+            rec["seed"] = frame_seed(self.seed, frame, light)  # = params(frame, light)
+            self.k_photons.bind(**scene, **geom, cp=rec)
             self.k_photons.launch(n, ls)
         self.k_filter.bind(cp=cp)
         self.k_filter.launch(self.n_texels, ls)
         self._history = True
+
+    def _frame_records(self) -> tuple:
+        """The map's record and (light, photon record) per light, made again only when the
+        settings, the history flag or the lights changed (the frame sets only the seed)."""
+        key = (self.settings, self._history, self.scene.lights.tobytes())
+        if key != self._records_key:
+            self._records = (self.params(), [(i, self.params(0, i)) for i in self.lights()])
+            self._records_key = key
+        return self._records
 
     # -- host reads (tests, tools; each synchronises) ----------------------------------------
     def faces(self, array: np.ndarray) -> dict:

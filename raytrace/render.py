@@ -16,11 +16,13 @@ the ray buffers would not fit in device memory):
 
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
 the shading). Every kernel (``kernels.launch.Kernel``) belongs to this renderer (one per depth
-level) and its arguments are bound by name when the scene's buffers change; per-launch values
-are the by-value RaygenParams/GatherParams records, so a frame is mostly bare enqueues from
-Python. Per-ray kernels loop with a grid stride over the device-side count and are launched for
-about the last arrived count (``size_hints``) rather than every slot: any size gives the same
-image.
+level; the tonemap pass has its own gather object) and its arguments are bound by name when the
+scene's buffers change; per-launch values are the by-value RaygenParams/GatherParams records.
+The frame's launches are a plan (kernel, sizes, stage; binds between them where several chunks
+need them) made once per launch sizes, depth, lights and bindings, and replayed each frame as
+bare enqueues. Per-ray kernels loop with a grid stride over the device-side count and are
+launched for about the last arrived count (``size_hints``) rather than every slot: any size
+gives the same image.
 
 Reads: :meth:`Renderer.enqueue_read_rgba` / :meth:`Renderer.enqueue_read_stats` copy into pinned
 host memory without a wait (``kernels.pinned``); ``read_*`` synchronise (tests, tools).
@@ -205,6 +207,10 @@ class Renderer:
                                            stage="render.raygen")
         self._k: list[dict[str, Kernel]] = []
         self._bound_sig: tuple | None = None  # the buffers the kernels were bound to
+        self._bind_version = 0                # counts rebinds (the launch plans' key)
+        self._caustic_bound: tuple | None = None  # caustics bound to the shadow kernels
+        self._plans: dict = {}                # launch plans by what they depend on
+        self._last_ops: list | None = None    # the plan of the last frame
         self._uploaded: tuple = (None, None)  # camera and params bytes on the device
         self._params_key = self._params_rec = None
         ls = s.local_size
@@ -235,7 +241,7 @@ class Renderer:
                       np.array([(0, q0, nq, 1)], GATHER_PARAMS)[0])
             self._plan.append((raygen, gather, (max(n_rays, STATS_LEN),), depths))
 
-    def _launch_sizes(self, depths: list, hint: tuple | None) -> list:
+    def _launch_sizes(self, depths: list, hint: tuple | None) -> tuple:
         """Per depth level: (rays work-items, scan size, gather size over rays, tonemap size over
         the chunk's pixels). The per-ray kernels loop with a grid stride over the device-side count,
         so any size is correct; with the last frame's counts (one chunk) a level is launched
@@ -254,7 +260,7 @@ class Renderer:
                 sizes.append(((n,), scan, (n,), (pixels,)))
             if len(self._sizes) > 64:
                 self._sizes.clear()
-            self._sizes[key] = sizes
+            sizes = self._sizes[key] = tuple(sizes)
         return sizes
 
     def set_stage_per_depth(self, on: bool = True) -> None:
@@ -284,7 +290,10 @@ class Renderer:
                 "shade": launcher("render_shade.cl", "render_shade", "render.shade"),
                 "shadow": launcher("render_shade.cl", "render_shadow", "render.shadow"),
                 "scan": launcher("render_secondary.cl", "render_scan", "render.secondary"),
-                "gather": launcher("render_frame.cl", "render_gather", "render.gather")})
+                "gather": launcher("render_frame.cl", "render_gather", "render.gather"),
+                # the same kernel for the tonemap pass after the last level: its own object,
+                # so neither changes arguments between frames
+                "finish": launcher("render_frame.cl", "render_gather", "render.gather")})
             self._bound_sig = None
         return self._k[depth]
 
@@ -321,11 +330,13 @@ class Renderer:
             k["scan"].bind(child_counts=self.child, counts=self.counts, depth=d,
                            capacity=self.capacity, block_sums=self.block_sums,
                            ticket=self.ticket, stats=self.stats)
-            k["gather"].bind(**shading, cam=self.camera_buf, **wave, hits=self.hits,
-                             child_offsets=self.child, block_sums=self.block_sums,
-                             out=self.rays[(d + 1) % 2], radiance=self.radiance,
-                             fb=self.framebuffer, rgba=self.rgba)
+            for g in (k["gather"], k["finish"]):
+                g.bind(**shading, cam=self.camera_buf, **wave, hits=self.hits,
+                       child_offsets=self.child, block_sums=self.block_sums,
+                       out=self.rays[(d + 1) % 2], radiance=self.radiance,
+                       fb=self.framebuffer, rgba=self.rgba)
         self._bound_sig = bufs
+        self._bind_version += 1
 
     # -- inputs -----------------------------------------------------------------------------
     def set_caustics(self, caustic_map: cl.Buffer | None, params=None) -> None:
@@ -391,7 +402,7 @@ class Renderer:
         frame's picture depends only on the scene and camera (per-ray kernels grid-stride over
         the device-side count: an empty level costs a few bare launches). The last frame's ray
         counts, when they have arrived, only size the launches."""
-        s, q = self.settings, self.rt.queue
+        s = self.settings
         if update_scene:
             self.scene.update()
         self._upload_inputs()
@@ -399,41 +410,93 @@ class Renderer:
         deepest = s.bounces if self.scene.has_secondary else 0
         self._levels = deepest
         self._bind(deepest)
-        ks = self._k
-        for k in ks[: deepest + 1]:  # set only when the caustics changed (bytes compared)
-            k["shadow"].bind(caustic_map=self.caustic_map, cprm=self.caustic_params)
-        ls = (s.local_size,)
-        scan_ls = (SCAN_WG,)
-        has_lights = len(self.scene.lights) > 0
-        fused = s.fuse_trace_shade
+        self._bind_caustics()
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
-        raygen = self.k_raygen
-        for rp, (gather_scatter, gather_last, gather_finish), raygen_size, depths \
-                in self._plan:
-            sizes = self._launch_sizes(depths, hint)
-            raygen.bind(rp=rp)
-            raygen.enqueue(raygen_size)
+        sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
+        key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
+               self._bind_version)
+        ops = self._plans.get(key)
+        if ops is None:
+            if len(self._plans) >= 16:
+                self._plans.clear()
+            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2])
+        self._run(ops, rebind=len(self._plan) > 1 or ops is not self._last_ops)
+        self._last_ops = ops
+        old = self._stats_handle
+        if old is not None:  # its event waits for the read when released: kept until done
+            self.rt.keep(old.event)
+        self._stats_handle = self.enqueue_read_stats()
+
+    #: Plan steps: a launch (cl kernel, global size, local size, stage), arguments to bind
+    #: (Kernel, {name: value}; with one chunk only when the plan changes) and a flush.
+    _LAUNCH, _BIND, _FLUSH = 0, 1, 2
+
+    def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool) -> list:
+        """The frame's launches in order, sizes and arguments decided: what the per-frame loop
+        did, made once per (sizes, depth, lights, stage names, bindings)."""
+        s, ks = self.settings, self._k
+        ls, scan_ls = (s.local_size,), (SCAN_WG,)
+        ops = []
+
+        def launch(k: Kernel, gs: tuple, lsz: tuple | None) -> None:
+            if k._unbound:
+                k._check_bound()
+            ops.append((self._LAUNCH, k.kernel, gs, lsz, k.stage))
+
+        def bind(k: Kernel, **values) -> None:  # now too, so that launch() can check
+            k.bind(**values)
+            ops.append((self._BIND, k, values))
+
+        for (rp, (gather_scatter, gather_last, gather_finish), raygen_size, _), sz in zip(
+                self._plan, sizes, strict=True):
+            bind(self.k_raygen, rp=rp)
+            launch(self.k_raygen, raygen_size, None)
             for depth in range(deepest + 1):
                 k = ks[depth]
-                ray_size, scan_size, scatter_size, pixel_size = sizes[depth]
-                k["trace_shade" if fused else "trace"].enqueue(ray_size, ls)
+                ray_size, scan_size, scatter_size, pixel_size = sz[depth]
+                launch(k["trace_shade" if s.fuse_trace_shade else "trace"], ray_size, ls)
                 if depth == 0 and rp["zero_stats"]:
-                    q.flush()  # the device starts while the rest is enqueued
-                if not fused:
-                    k["shade"].enqueue(ray_size, ls)
+                    ops.append((self._FLUSH,))  # the device starts while the rest is enqueued
+                if not s.fuse_trace_shade:
+                    launch(k["shade"], ray_size, ls)
                 if has_lights:
-                    k["shadow"].enqueue(ray_size, ls)
-                g = k["gather"]
+                    launch(k["shadow"], ray_size, ls)
                 if depth < deepest:
-                    k["scan"].enqueue(scan_size, scan_ls)
-                    g.bind(gp=gather_scatter)
-                    g.enqueue(scatter_size, ls)
+                    launch(k["scan"], scan_size, scan_ls)
+                    bind(k["gather"], gp=gather_scatter)
+                    launch(k["gather"], scatter_size, ls)
                 else:
-                    g.bind(gp=gather_last)
-                    g.enqueue(scatter_size, ls)
-                    g.bind(gp=gather_finish)
-                    g.enqueue(pixel_size, ls)
-        self._stats_handle = self.enqueue_read_stats()
+                    bind(k["gather"], gp=gather_last)
+                    launch(k["gather"], scatter_size, ls)
+                    bind(k["finish"], gp=gather_finish)
+                    launch(k["finish"], pixel_size, ls)
+        return ops
+
+    def _run(self, ops: list, rebind: bool) -> None:
+        """Enqueue a plan: each launch one bare enqueue, its event recorded under its stage."""
+        q, enqueue, record = self.rt.queue, cl.enqueue_nd_range_kernel, self.rt.timer.record
+        launch, bind = self._LAUNCH, self._BIND
+        for op in ops:
+            kind = op[0]
+            if kind == launch:
+                record(op[4], enqueue(q, op[1], op[2], op[3]))
+            elif kind == bind:
+                if rebind:
+                    op[1].bind(**op[2])
+            else:
+                q.flush()
+
+    def _bind_caustics(self) -> None:
+        """Bind the caustic map and its record to every level's shadow kernel when they (or the
+        kernels' bindings) changed."""
+        cmap, cprm = self.caustic_map, self.caustic_params.tobytes()
+        old = self._caustic_bound
+        if old is not None and old[0] is cmap and old[1] == cprm and \
+                old[2] == self._bind_version:
+            return
+        for k in self._k:
+            k["shadow"].bind(caustic_map=cmap, cprm=self.caustic_params)
+        self._caustic_bound = (cmap, cprm, self._bind_version)
 
     def _count_hint(self) -> tuple | None:
         """Rays per depth of the last frame whose counts have arrived (never waits)."""
@@ -441,8 +504,7 @@ class Renderer:
         if h is None or not h.ready():
             return self._last_hint
         st = h.array
-        self._last_hint = tuple(int(x) for x in st[: self.settings.bounces + 1]) \
-            if h.valid else None
+        self._last_hint = tuple(st[: self.settings.bounces + 1].tolist()) if h.valid else None
         return self._last_hint
 
     def _upload_inputs(self) -> None:
@@ -455,10 +517,13 @@ class Renderer:
         prm = self._params_rec.tobytes()
         old_cam, old_prm = self._uploaded
         q = self.rt.queue
+        keep = self.rt.keep  # released at once, a copy's event would wait for the copy
         if cam != old_cam:
-            cl.enqueue_copy(q, self.camera_buf, np.frombuffer(cam, np.uint8), is_blocking=False)
+            keep(cl.enqueue_copy(q, self.camera_buf, np.frombuffer(cam, np.uint8),
+                                 is_blocking=False))
         if prm != old_prm:
-            cl.enqueue_copy(q, self.params_buf, np.frombuffer(prm, np.uint8), is_blocking=False)
+            keep(cl.enqueue_copy(q, self.params_buf, np.frombuffer(prm, np.uint8),
+                                 is_blocking=False))
         self._uploaded = (cam, prm)
 
     # -- non-blocking reads -------------------------------------------------------------------
@@ -484,7 +549,7 @@ class Renderer:
         """:meth:`read_stats`'s dictionary from a stats array (e.g. ``stats_handle.wait()``)."""
         st = np.asarray(counts)
         L = self._levels
-        per_depth = [int(x) for x in st[: L + 1]]
+        per_depth = st[: L + 1].tolist()
         if L == 0 and not self.scene.has_secondary:  # no scan ran: the chunks' primary rays
             per_depth = [sum(nq * self.settings.spp for _, nq in self.chunks)]
         return {"rays_per_depth": per_depth, "dropped": int(st[STAT_DROPPED]),

@@ -385,8 +385,9 @@ class Scene:
         if n != self._tlas_n:
             self._allocate_tlas(n)
         if self._masks_dirty:
-            cl.enqueue_copy(self.rt.queue, self._inst_mask_dev,
-                            np.array(self._inst_masks, np.uint32), is_blocking=False)
+            self.rt.keep(cl.enqueue_copy(self.rt.queue, self._inst_mask_dev,
+                                         np.array(self._inst_masks, np.uint32),
+                                         is_blocking=False))
             self._masks_dirty = False
         self._prep()
         self._morton()

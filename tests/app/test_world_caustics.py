@@ -106,6 +106,36 @@ def test_caustic_frames_are_deterministic(flat, rt):
     assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
 
 
+def test_the_photon_launches_get_the_records_params_makes(flat, rt):
+    """The stage reuses its records between frames (only the seed changes): each launch's
+    bytes equal a fresh params(frame, light), across history, light and mode changes."""
+    w = World(flat, rt, caustics="traced")
+    c = w._caustics
+    seen = []
+
+    class Spy:
+        def __init__(self, k):
+            self.k = k
+
+        def bind(self, **kw):
+            seen.append((kw["cp"].tobytes(), c.params(w.frames_enqueued, 0).tobytes()))
+            return self.k.bind(**kw)
+
+        def launch(self, *a):
+            return self.k.launch(*a)
+
+    c.k_photons = Spy(c.k_photons)
+    w.frame(0.0)
+    w.frame(0.0)                                    # with history: blend on
+    w.render_scene.lights[0]["color"][:3] = (3.0, 2.0, 1.0)   # a light changed in place
+    w.frame(0.0)
+    w.set_caustics("off")
+    w.set_caustics("traced")                        # history off again
+    w.frame(0.0)
+    assert len(seen) == 4 and all(got == want for got, want in seen)
+    assert len({got for got, _ in seen}) == 4
+
+
 def test_bad_caustic_settings_are_one_line_errors(flat, rt, tmp_path):
     with pytest.raises(InputError, match=r"\[shading\].*projected.*not implemented"):
         World(flat, rt, caustics="projected")

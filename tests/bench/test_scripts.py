@@ -76,3 +76,13 @@ def test_profile_host_prints_the_frame_and_the_top_functions(capsys, rt):
     out = capsys.readouterr().out
     assert "3 frames" in out and "ms/frame wall under cProfile" in out
     assert "enqueue_frame" in out or "Ordered by: internal time" in out
+
+
+def test_host_frame_reports_the_hosts_ms_per_frame(capsys, rt):
+    assert _script("host_frame").main(["--cells", "32", "--size", "16", "12", "--frames", "3",
+                                       "--steps", "2", "--hold-ms", "2", "--split"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["lbm_steps"] == 2 and out["events_per_frame"] > 20
+    assert 0 < out["enqueue_py_ms"] <= out["enqueue_ms"] and out["read_ms"] > 0
+    assert out["enqueue_cl_calls"] >= out["events_per_frame"]
+    assert out["pipelined_wall_ms"] > 0 and 0 <= out["held_waits"] <= 3

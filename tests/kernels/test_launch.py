@@ -125,6 +125,30 @@ def test_values_set_only_when_their_bytes_change(rt):
     assert counter.calls == [0, 1, 3, 1, 3, 0]
 
 
+def test_a_record_changed_in_place_is_set_again_an_equal_scalar_is_not(rt):
+    k = rt.kernel_launcher("launch_probe.cl", "launch_probe", stage="test.probe")
+    counter = CountingKernel(k.kernel)
+    k.kernel = counter
+    recs = np.zeros(1, PROBE_DTYPE)
+    k.bind(out=rt.buffer(16 * 4), p=recs[0], n=4, offset=(0, 0, 0, 0),
+           scratch=cl.LocalMemory(64))
+    assert counter.calls == [0, 1, 3, 2, 4]
+    k.bind(p=recs[0], n=4, offset=(0, 0, 0, 0))      # same record bytes, same int: nothing
+    assert counter.calls == [0, 1, 3, 2, 4]
+    recs["count"] = 7                                 # the same record object, new bytes
+    k.bind(p=recs[0], n=np.uint32(4))
+    k.bind(n=True)                                    # == 1 but of another type: converted
+    assert counter.calls == [0, 1, 3, 2, 4, 1, 3]
+    k.bind(n=np.array(2))                             # a 0-d array (converted) in between...
+    k.bind(n=True)                                    # ...so the equal bool is set again
+    assert counter.calls == [0, 1, 3, 2, 4, 1, 3, 3, 3]
+    k.kernel = counter.kernel
+    k.launch(4, 16)
+    k.launch(np.array([4]), 16)                       # unhashable sizes: converted each time
+    got = rt.to_host(k._held[0], np.float32, 4 * 4).reshape(4, 4)
+    assert got[0, 2] == 7 and got[0, 3] == 1
+
+
 def test_set_size_prepares_rounded_sizes(rt):
     k = rt.kernel_launcher("launch_probe.cl", "launch_probe", stage="test.probe")
     k.set_size(37, 16)

@@ -80,3 +80,35 @@ def test_includes_resolve_to_the_kernel_folder_not_the_cwd(tmp_path, monkeypatch
     monkeypatch.chdir(tmp_path)
     nonce = int.from_bytes(tmp_path.name.encode()[-4:], "little")
     Runtime(rt.device).program("bandwidth.cl", {"LBWATER_TEST_NONCE": nonce})
+
+
+def test_stage_times_are_the_sums_of_their_kernels_times(rt):
+    """StageTimer: per stage the sum of (END - START) of its events, interleaved stages kept
+    apart, read from a completed frame without waiting and from one still queued."""
+    from kernels.timing import StageTimer
+
+    timer = StageTimer(max_frames=4)
+    k = rt.kernel_launcher("launch_probe.cl", "launch_probe", stage="x")
+    out = rt.buffer(16 * 256)
+    probe = np.dtype([("scale", "<f4"), ("bias", "<f4"), ("count", "<u4"), ("sign", "<i4")])
+    k.bind(out=out, p=np.zeros(1, probe)[0], offset=(0, 0, 0, 0), n=256,
+           scratch=cl.LocalMemory(64))
+    frames = []
+    for tag in range(3):
+        evts = []
+        for i in range(7):
+            e = cl.enqueue_nd_range_kernel(rt.queue, k.kernel, (256,), (16,))
+            evts.append(("ab"[i % 3 == 0], timer.record("ab"[i % 3 == 0], e)))
+        timer.close_frame(tag)
+        frames.append(evts)
+    rt.finish()
+    got = timer.completed() + timer.completed(wait=True)
+    assert [t for t, _ in got] == [0, 1, 2]
+    for (_, ms), evts in zip(got, frames, strict=True):
+        want = {}
+        for stage, e in evts:
+            want[stage] = want.get(stage, 0.0) + (e.profile.end - e.profile.start) * 1e-6
+        assert ms == want and set(ms) == {"a", "b"}
+    timer.record("a", cl.enqueue_nd_range_kernel(rt.queue, k.kernel, (256,), (16,)))
+    timer.close_frame(3)
+    assert set(timer.completed(wait=True)[0][1]) == {"a"}   # waited for the queued frame
