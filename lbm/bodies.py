@@ -43,6 +43,11 @@ BODY_WG = 512
 #: which boats' cells can meet.
 MAX_SPEED = 5.0
 RHO_WATER = 1000.0
+#: Target cells of the pressure pass per work-item (sets the work-groups per boat of an update;
+#: each group also recomputes the boat's reduction, so more groups cost more redundant work).
+PRESS_CELLS = 4.0
+#: Most work-groups per boat in an update.
+MAX_GROUPS = 64
 
 
 class HullError(ValueError):
@@ -347,6 +352,11 @@ class Boats:
                                                     stage="lbm.bodies", defines=defines)
         self._held_s, self._held_steps = 0.0, 0   # water time since the last coupled update
         self._rec_key, self._rec = None, None
+        #: Target press cells per work-item (sets :meth:`groups_per_boat`); ``press_groups``:
+        #: a fixed number of work-groups per boat instead (tests, benchmarks).
+        self.press_cells: float = PRESS_CELLS
+        self.press_groups: int | None = None
+        self._groups_key, self._groups = None, 1
         self._depth = None
         self._floor = 0.0
         specs, rows = list(specs), list(rows)
@@ -532,6 +542,25 @@ class Boats:
             self._rec_key = key
         return self._rec
 
+    def groups_per_boat(self, dt: float) -> int:
+        """Work-groups per boat slot in an update of ``dt`` seconds: :attr:`press_groups` if
+        set, else enough for :attr:`press_cells` cells per work-item over a bound of the
+        cells a boat presses (the rectangle of its bounding circle's box, widened by how far
+        it can move at :data:`MAX_SPEED`; after :meth:`place` its old box can lie farther: its
+        groups then stride over more cells)."""
+        if self.press_groups is not None:
+            return int(self.press_groups)
+        key = (dt, tuple(self._slots))
+        if key != self._groups_key:
+            reach = MAX_SPEED * dt * 1.001
+            r = max((float(self._host[k]["damping"][3]) for k in self._slots), default=0.0)
+            side = math.floor(2.0 * (r + reach) / self.sim.dx) + 8
+            area = min(side, self.sim.nx) * min(side, self.sim.ny)
+            cells = BODY_WG * max(float(self.press_cells), 1.0 / BODY_WG)
+            self._groups = max(1, min(MAX_GROUPS, math.ceil(area / cells)))
+            self._groups_key = key
+        return self._groups
+
     @property
     def every(self) -> int:
         """Water steps per coupled update: the most whose time fits in ``max_substep``, >= 1."""
@@ -554,12 +583,13 @@ class Boats:
         if self._n == 0 or dt == 0:
             return None
         n_sub = max(1, math.ceil(dt / self.max_substep * (1 - 1e-9)))
+        groups = self.groups_per_boat(dt)
         sim = self.sim
         self._k_update.bind(f=sim.populations_buffer, zforce=self._zforce, bed=sim.bed_buffer,
                             p=sim.params, foot=self._foot, bodies=self._bodies,
                             out=self._bodies_out, transforms=self.transforms,
                             s=self._step_record(dt / n_sub, n_sub))
-        event = self._k_update.launch(self._n * BODY_WG, BODY_WG)
+        event = self._k_update.launch(self._n * groups * BODY_WG, BODY_WG)
         self._bodies, self._bodies_out = self._bodies_out, self._bodies
         return event
 
