@@ -1,26 +1,33 @@
 /* Floating rigid bodies coupled both ways with the shallow water (lbm/bodies.py, docs/lbm.md).
  * One bodies update is one launch for all bodies, no host copy:
  *
- *   lbm_bodies_update     one work-group per body, all substeps in the launch: sample the water
- *                         under every footprint column (bilinear head H = bed + hull pressure + h
- *                         and velocity), reduce buoyancy, drag, force and torque in local memory,
- *                         then work-item 0 integrates the rigid body (semi-implicit Euler with
- *                         added mass) and stops it at the walls; after the last substep the group
- *                         writes the pose, its row of the transform buffer (world_from_mesh) and
- *                         the cell box its pressure head covers (box; the previous one: box_old),
- *                         then presses: over the cells of box and box_old (the box: where the
- *                         footprint meets the still-water plane, within the bounding circle's
- *                         box), zforce = bed + the hulls' pressure head, the "bed" the water's
- *                         force sees, so a hull pushes water away (a wake, waves) and conserves
- *                         its volume exactly; cells of box_old that left the hull get the bed
- *                         back. Bodies whose cells can meet during the update (what the water
- *                         they read, what they press: known from the start with the speed limit
- *                         LBM_BODY_MAX_SPEED) form a cluster that one work-group, the lowest
- *                         body's, updates body after body then presses (a cell in several boxes:
- *                         the lowest body's); the others return. So no cell is read by one group
- *                         and written by another, or written twice: the result is deterministic
- *                         with no global synchronisation. The records are read from ``bodies``
- *                         and written to ``out`` (the host swaps them every update).
+ *   lbm_bodies_update     G work-groups per body (G from the launch's size), all substeps in
+ *                         the launch: sample the water under every footprint column (bilinear
+ *                         head H = bed + hull pressure + h and velocity), reduce buoyancy, drag,
+ *                         force and torque in local memory, then work-item 0 integrates the rigid
+ *                         body (semi-implicit Euler with added mass) and stops it at the walls;
+ *                         after the last substep the body's first group writes the pose, its row
+ *                         of the transform buffer (world_from_mesh) and the cell box its pressure
+ *                         head covers (box; the previous one: box_old); then each group presses
+ *                         its tile (LBM_BODY_WG consecutive cells in turn) of the rectangle
+ *                         holding box and box_old (the box: where the footprint meets the
+ *                         still-water plane, within the bounding circle's box): zforce = bed + the
+ *                         hulls' pressure head, the "bed" the water's force sees, so a hull pushes
+ *                         water away (a wake, waves) and conserves its volume exactly; cells of
+ *                         box_old that left the hull get the bed back. Every group of a body
+ *                         computes the same update (same inputs, code and order: the same bits),
+ *                         so the pass needs no global synchronisation; the water it reads is the
+ *                         populations and the bed plus the pressure head of the poses at the start
+ *                         (recomputed: the zforce cells under a hull are rewritten by the other
+ *                         groups during the launch), none of which the launch writes. Bodies whose
+ *                         cells can meet during the update (what the water they read, what they
+ *                         press: known from the start with the speed limit LBM_BODY_MAX_SPEED)
+ *                         form a cluster: every group of each of them updates the whole cluster
+ *                         body after body, then presses its tile of its own body (a cell in
+ *                         several bodies' rectangles: the lowest body's), with the cluster's
+ *                         heads. So no cell is written twice and the result is deterministic.
+ *                         The records are read from ``bodies`` and written to ``out`` (the host
+ *                         swaps them every update).
  *   lbm_bodies_press_all  the pressure head over every cell (when boats are added or dropped)
  *
  * Hydrostatics: the pressure under a hull column whose bottom is at Y_b is rho g (H - Y_b), H the

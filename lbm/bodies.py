@@ -4,15 +4,16 @@ Host side of ``kernels/lbm_bodies.cl``. The host precomputes, once per hull, a c
 description from the closed mesh (:class:`Hull`): volume, centre of mass and principal moments of
 a uniform solid, and a footprint height map (where the hull crosses vertical lines on a small grid
 in body coordinates, ringed by empty columns that measure the water level around the hull).
-:meth:`Boats.enqueue_step` only enqueues one launch for all boats (one work-group per boat,
-every substep in the launch: buoyancy and drag from the water under every column, a local
+:meth:`Boats.enqueue_step` only enqueues one launch for all boats (several work-groups per
+boat, every substep in the launch: buoyancy and drag from the water under every column, a local
 reduction to force and torque, then semi-implicit Euler with added mass, walls, and the pose
-written into the caller's transform buffer as world_from_mesh; then the same work-group presses
-the hull on the water over the cells of its box only: the hulls' pressure head added to the bed
-the water's force sees, so the hull pushes water away, a moving boat makes a wake and a heaving
-one makes waves; water volume is conserved exactly). Boats whose cells can meet within an
-update (known from the start: a horizontal speed limit, :data:`MAX_SPEED`) are updated by one
-work-group, so the launch needs no global synchronisation and is deterministic. Coupled to
+written into the caller's transform buffer as world_from_mesh; then each of the boat's groups
+presses its tile of the hull's box only: the hulls' pressure head added to the bed the water's
+force sees, so the hull pushes water away, a moving boat makes a wake and a heaving one makes
+waves; water volume is conserved exactly). Every group of a boat computes the same update (the
+same inputs and code: the same bits); boats whose cells can meet within an update (known from
+the start: a horizontal speed limit, :data:`MAX_SPEED`) are updated together by each of their
+groups, so the launch needs no global synchronisation and is deterministic. Coupled to
 ``sim.step``, the boats are updated every :attr:`Boats.every` water steps, at most
 ``max_substep`` seconds apart (the coupling lag is bounded in time, not in steps). See
 docs/lbm.md, "Floating bodies".
