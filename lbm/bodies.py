@@ -548,7 +548,9 @@ class Boats:
         set, else enough for :attr:`press_cells` cells per work-item over a bound of the
         cells a boat presses (the rectangle of its bounding circle's box, widened by how far
         it can move at :data:`MAX_SPEED`; after :meth:`place` its old box can lie farther: its
-        groups then stride over more cells)."""
+        groups then stride over more cells), at most one wave: the device's compute units
+        over the boats (each group of 512 redoes the boat's reduction, so a second wave would
+        cost a second reduction's time)."""
         if self.press_groups is not None:
             return int(self.press_groups)
         key = (dt, tuple(self._slots))
@@ -558,7 +560,8 @@ class Boats:
             side = math.floor(2.0 * (r + reach) / self.sim.dx) + 8
             area = min(side, self.sim.nx) * min(side, self.sim.ny)
             cells = BODY_WG * max(float(self.press_cells), 1.0 / BODY_WG)
-            self._groups = max(1, min(MAX_GROUPS, math.ceil(area / cells)))
+            wave = self.rt.device.max_compute_units // max(len(self._slots), 1)
+            self._groups = max(1, min(MAX_GROUPS, wave, math.ceil(area / cells)))
             self._groups_key = key
         return self._groups
 
