@@ -1,11 +1,14 @@
 """The bodies stage alone: the pool scene's water at ``--cells`` with N copies of its boat (as
 ``lbwater bench frame --boats N``), frames of 1/60 s of water, no rendering. Per frame (median
 after warm-up): ``lbm.bodies`` ms (one launch per update: the bodies and their pressure
-pass), bodies updates and launches per frame, water steps per frame; ``--every-step`` adds rows
-at the old cadence (an update after every water step) for comparison. Prints one line per row
-and writes DIR/bodies_stage.json.
+pass), bodies updates and launches per frame, work-groups per boat, water steps per frame;
+``--groups`` sweeps the work-groups per boat (0: ``Boats.groups_per_boat``'s choice; 1: one
+group per boat, the previous design); ``--every-step`` adds rows at the old cadence (an update
+after every water step) for comparison. Prints one line per row and writes
+DIR/bodies_stage.json.
 
     python3 bench/bodies_stage.py --cells 1024 --boats 1 16 --frames 60 --out DIR
+    python3 bench/bodies_stage.py --cells 1024 --boats 1 16 --groups 0 1 4 8 16 32 --out DIR
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ sys.path.insert(0, str(ROOT))
 
 
 def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
-            every_step: bool) -> dict:
+            every_step: bool, groups: int = 0) -> dict:
     import lbm
     from app.assemble import water_spec
     from app.bench_frame import with_boats
@@ -34,6 +37,8 @@ def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
     boats = make_boats(sc, sim, bodies, rt.buffer(48 * len(bodies)), list(range(len(bodies))))
     if every_step:
         boats.max_substep = sim.dt * (1 + 1e-6)
+    if groups > 0:
+        boats.press_groups = groups
     per_frame = max(1, round((1 / 60) / sim.dt))
     rows = []
     for i in range(warmup + frames):
@@ -45,11 +50,13 @@ def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
             rows.append(ms)
     bodies_ms = statistics.median(r.get("lbm.bodies", 0.0) for r in rows)
     updates = per_frame / boats.every
+    groups = boats.groups_per_boat(boats.every * sim.dt)
     boats.close()
     return {"device": rt.name, "cells": f"{sim.nx}x{sim.ny}", "boats": n_boats,
             "cadence": "every step" if every_step else f"every {boats.every} steps",
             "water_steps_per_frame": per_frame, "updates_per_frame": round(updates, 2),
-            "launches_per_frame": round(updates, 2), "bodies_ms": round(bodies_ms, 4),
+            "launches_per_frame": round(updates, 2), "groups_per_boat": groups,
+            "bodies_ms": round(bodies_ms, 4),
             "ms_per_launch": round(bodies_ms / updates, 4),
             "lbm_step_ms": round(statistics.median(r.get("lbm.step", 0.0) for r in rows), 4)}
 
@@ -61,6 +68,8 @@ def main(argv=None) -> int:
     p.add_argument("--boats", type=int, nargs="+", default=[1, 16])
     p.add_argument("--frames", type=int, default=60)
     p.add_argument("--warmup", type=int, default=10)
+    p.add_argument("--groups", type=int, nargs="+", default=[0],
+                   help="work-groups per boat (0: the default choice)")
     p.add_argument("--every-step", action="store_true",
                    help="also time an update after every water step (the old cadence)")
     p.add_argument("--device", default=None)
@@ -74,12 +83,14 @@ def main(argv=None) -> int:
     out = []
     for n in args.boats:
         for every_step in ((False, True) if args.every_step else (False,)):
-            row = measure(rt, scene, args.cells, n, args.frames, args.warmup, every_step)
-            out.append(row)
-            print(f"{row['cells']} {n:2d} boats, {row['cadence']}: bodies {row['bodies_ms']:.4f}"
-                  f" ms/frame ({row['ms_per_launch']:.4f} per launch), "
-                  f"{row['launches_per_frame']} launches/frame, lbm.step "
-                  f"{row['lbm_step_ms']:.3f} ms", flush=True)
+            for g in args.groups:
+                row = measure(rt, scene, args.cells, n, args.frames, args.warmup, every_step, g)
+                out.append(row)
+                print(f"{row['cells']} {n:2d} boats, {row['cadence']}, {row['groups_per_boat']}"
+                      f" groups/boat: bodies {row['bodies_ms']:.4f} ms/frame "
+                      f"({row['ms_per_launch']:.4f} per launch), "
+                      f"{row['launches_per_frame']} launches/frame, lbm.step "
+                      f"{row['lbm_step_ms']:.3f} ms", flush=True)
     d = Path(args.out)
     d.mkdir(parents=True, exist_ok=True)
     (d / "bodies_stage.json").write_text(json.dumps(out, indent=1))

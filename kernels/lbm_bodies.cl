@@ -1,26 +1,33 @@
 /* Floating rigid bodies coupled both ways with the shallow water (lbm/bodies.py, docs/lbm.md).
  * One bodies update is one launch for all bodies, no host copy:
  *
- *   lbm_bodies_update     one work-group per body, all substeps in the launch: sample the water
- *                         under every footprint column (bilinear head H = bed + hull pressure + h
- *                         and velocity), reduce buoyancy, drag, force and torque in local memory,
- *                         then work-item 0 integrates the rigid body (semi-implicit Euler with
- *                         added mass) and stops it at the walls; after the last substep the group
- *                         writes the pose, its row of the transform buffer (world_from_mesh) and
- *                         the cell box its pressure head covers (box; the previous one: box_old),
- *                         then presses: over the cells of box and box_old (the box: where the
- *                         footprint meets the still-water plane, within the bounding circle's
- *                         box), zforce = bed + the hulls' pressure head, the "bed" the water's
- *                         force sees, so a hull pushes water away (a wake, waves) and conserves
- *                         its volume exactly; cells of box_old that left the hull get the bed
- *                         back. Bodies whose cells can meet during the update (what the water
- *                         they read, what they press: known from the start with the speed limit
- *                         LBM_BODY_MAX_SPEED) form a cluster that one work-group, the lowest
- *                         body's, updates body after body then presses (a cell in several boxes:
- *                         the lowest body's); the others return. So no cell is read by one group
- *                         and written by another, or written twice: the result is deterministic
- *                         with no global synchronisation. The records are read from ``bodies``
- *                         and written to ``out`` (the host swaps them every update).
+ *   lbm_bodies_update     G work-groups per body (G from the launch's size), all substeps in
+ *                         the launch: sample the water under every footprint column (bilinear
+ *                         head H = bed + hull pressure + h and velocity), reduce buoyancy, drag,
+ *                         force and torque in local memory, then work-item 0 integrates the rigid
+ *                         body (semi-implicit Euler with added mass) and stops it at the walls;
+ *                         after the last substep the body's first group writes the pose, its row
+ *                         of the transform buffer (world_from_mesh) and the cell box its pressure
+ *                         head covers (box; the previous one: box_old); then each group presses
+ *                         its tile (LBM_BODY_WG consecutive cells in turn) of the rectangle
+ *                         holding box and box_old (the box: where the footprint meets the
+ *                         still-water plane, within the bounding circle's box): zforce = bed + the
+ *                         hulls' pressure head, the "bed" the water's force sees, so a hull pushes
+ *                         water away (a wake, waves) and conserves its volume exactly; cells of
+ *                         box_old that left the hull get the bed back. Every group of a body
+ *                         computes the same update (same inputs, code and order: the same bits),
+ *                         so the pass needs no global synchronisation; the water it reads is the
+ *                         populations and the bed plus the pressure head of the poses at the start
+ *                         (recomputed: the zforce cells under a hull are rewritten by the other
+ *                         groups during the launch), none of which the launch writes. Bodies whose
+ *                         cells can meet during the update (what the water they read, what they
+ *                         press: known from the start with the speed limit LBM_BODY_MAX_SPEED)
+ *                         form a cluster: every group of each of them updates the whole cluster
+ *                         body after body, then presses its tile of its own body (a cell in
+ *                         several bodies' rectangles: the lowest body's), with the cluster's
+ *                         heads. So no cell is written twice and the result is deterministic.
+ *                         The records are read from ``bodies`` and written to ``out`` (the host
+ *                         swaps them every update).
  *   lbm_bodies_press_all  the pressure head over every cell (when boats are added or dropped)
  *
  * Hydrostatics: the pressure under a hull column whose bottom is at Y_b is rho g (H - Y_b), H the
@@ -49,39 +56,6 @@ float4 lbm_quat_mul(const float4 a, const float4 b)
                      a.x * b.w + a.y * b.z - a.z * b.y + a.w * b.x);
 }
 
-/* Head (m, world y), velocity (m/s, world x and z) of cell n. */
-void lbm_water_cell(__global const LBM_FT* f, __global const float* zforce, const LbmParams p,
-                    const int n, float* H, float* u, float* v)
-{
-    float fl[9], h, mx, my;
-    for (int a = 0; a < 9; ++a) fl[a] = lbm_load(f, a, n, p);
-    lbm_moments(fl, &h, &mx, &my);
-    *H = zforce[n] + h;
-    *u = p.e * mx / h;
-    *v = p.e * my / h;
-}
-
-/* The water at world (X, Z): bilinear between cell centres, clamped to the grid. */
-void lbm_water_at(__global const LBM_FT* f, __global const float* zforce, const LbmParams p,
-                  const float4 origin, const float X, const float Z, float* H, float* u, float* v)
-{
-    const float gx = clamp((X - origin.x) / p.dx - 0.5f, 0.0f, (float)(p.nx - 1));
-    const float gz = clamp((Z - origin.z) / p.dx - 0.5f, 0.0f, (float)(p.ny - 1));
-    const int i0 = min((int)gx, p.nx - 1), j0 = min((int)gz, p.ny - 1);
-    const int i1 = min(i0 + 1, p.nx - 1), j1 = min(j0 + 1, p.ny - 1);
-    const float fx = gx - (float)i0, fz = gz - (float)j0;
-    float H00, u00, v00, H10, u10, v10, H01, u01, v01, H11, u11, v11;
-    lbm_water_cell(f, zforce, p, LBM_CELL(p, i0, j0), &H00, &u00, &v00);
-    lbm_water_cell(f, zforce, p, LBM_CELL(p, i1, j0), &H10, &u10, &v10);
-    lbm_water_cell(f, zforce, p, LBM_CELL(p, i0, j1), &H01, &u01, &v01);
-    lbm_water_cell(f, zforce, p, LBM_CELL(p, i1, j1), &H11, &u11, &v11);
-    const float w00 = (1.0f - fx) * (1.0f - fz), w10 = fx * (1.0f - fz);
-    const float w01 = (1.0f - fx) * fz, w11 = fx * fz;
-    *H = origin.y + w00 * H00 + w10 * H10 + w01 * H01 + w11 * H11;
-    *u = w00 * u00 + w10 * u10 + w01 * u01 + w11 * u11;
-    *v = w00 * v00 + w10 * v10 + w01 * v01 + w11 * v11;
-}
-
 float3 lbm_rot(const float3 r0, const float3 r1, const float3 r2, const float3 v)
 {
     return (float3)(dot(r0, v), dot(r1, v), dot(r2, v));
@@ -90,6 +64,116 @@ float3 lbm_rot(const float3 r0, const float3 r1, const float3 r2, const float3 v
 float3 lbm_rot_t(const float3 r0, const float3 r1, const float3 r2, const float3 v)
 {
     return r0 * v.x + r1 * v.y + r2 * v.z;
+}
+
+/* What the pressure kernels need of a body, staged in local memory once per work-group. */
+typedef struct {
+    float4 pos;        /* centre of mass, m; w: bounding radius, m */
+    float4 r0, r1, r2; /* world_from_body rows; r0.w: the still-water level L, m */
+    float4 foot;       /* x0, z0, dfx, dfz */
+    int4 n;            /* nfx, nfz, footprint offset, active */
+} LbmPressBody;
+
+/* Stage body *src in *dst (built in private memory, then copied). */
+void lbm_press_body(__local LbmPressBody* dst, const LbmBody* src)
+{
+    const LbmBody B = *src;
+    float3 r0, r1, r2;
+    lbm_quat_rows(B.quat, &r0, &r1, &r2);
+    LbmPressBody o;
+    o.pos = (float4)(B.pos.xyz, B.damping.w);
+    o.r0 = (float4)(r0, B.torque.w);
+    o.r1 = (float4)(r1, 0.0f);
+    o.r2 = (float4)(r2, 0.0f);
+    o.foot = B.foot;
+    o.n = (int4)(B.foot_n.x, B.foot_n.y, B.foot_n.z, B.flags.x);
+    *dst = o;
+}
+
+/* The cells a body's pressure pass covers: the bounding rectangle of box and box_old. */
+int4 lbm_press_cells(const int4 box, const int4 box_old)
+{
+    return (int4)(min(box.x, box_old.x), min(box.y, box_old.y), max(box.z, box_old.z),
+                  max(box.w, box_old.w));
+}
+
+int lbm_boxes_meet(const int4 a, const int4 b)
+{
+    return a.x <= b.z && b.x <= a.z && a.y <= b.w && b.y <= a.w;
+}
+
+/* The hulls' pressure head (m) at world (X, Z): over the bodies in ``mask`` (bit b: body b, in
+ * increasing b), per hull over it, clamp(L - Y_b, 0, Y_t - Y_b) of its nearest footprint column. */
+float lbm_hull_head(__local const LbmPressBody* l_b, const int mask,
+                    __global const float2* restrict foot, const float X, const float Z)
+{
+    float d = 0.0f;
+    for (int m = mask; m != 0; m &= m - 1) {
+        const int b = 31 - clz(m & -m);
+        if (l_b[b].n.w == 0) continue;
+        const float4 pos = l_b[b].pos;
+        const float dxw = X - pos.x, dzw = Z - pos.z;
+        if (dxw * dxw + dzw * dzw > pos.w * pos.w) continue;
+        const float3 r0 = l_b[b].r0.xyz, r1 = l_b[b].r1.xyz, r2 = l_b[b].r2.xyz;
+        const float L = l_b[b].r0.w;
+        const float4 fp = l_b[b].foot;
+        const int4 fn = l_b[b].n;
+        const float3 loc = lbm_rot_t(r0, r1, r2, (float3)(dxw, L - pos.y, dzw));
+        const int ix = (int)round((loc.x - fp.x) / fp.z);
+        const int iz = (int)round((loc.z - fp.y) / fp.w);
+        if (ix < 0 || iz < 0 || ix >= fn.x || iz >= fn.y) continue;
+        const float2 col = foot[fn.z + iz * fn.x + ix];
+        if (col.y < col.x) continue;
+        const float xc = fp.x + (float)ix * fp.z;
+        const float zc = fp.y + (float)iz * fp.w;
+        const float yb = pos.y + dot(r1, (float3)(xc, col.x, zc));
+        const float yt = pos.y + dot(r1, (float3)(xc, col.y, zc));
+        const float lo = fmin(yb, yt), hi = fmax(yb, yt);
+        d += clamp(L - lo, 0.0f, hi - lo);
+    }
+    return d;
+}
+
+/* Head (m, world y, above origin.y), velocity (m/s, world x and z) of cell (i, j): the bed the
+ * water's force sees there (bed + the hulls' pressure head, as the pressure pass writes it into
+ * zforce, here from the records of ``mask`` at the start of the update) plus the depth. */
+void lbm_water_cell(__global const LBM_FT* f, __global const float* bed,
+                    __local const LbmPressBody* l_b0, const int mask,
+                    __global const float2* foot, const LbmParams p, const float4 origin,
+                    const int i, const int j, float* H, float* u, float* v)
+{
+    const int n = LBM_CELL(p, i, j);
+    float fl[9], h, mx, my;
+    for (int a = 0; a < 9; ++a) fl[a] = lbm_load(f, a, n, p);
+    lbm_moments(fl, &h, &mx, &my);
+    const float X = origin.x + ((float)i + 0.5f) * p.dx;
+    const float Z = origin.z + ((float)j + 0.5f) * p.dx;
+    *H = (bed[n] + lbm_hull_head(l_b0, mask, foot, X, Z)) + h;
+    *u = p.e * mx / h;
+    *v = p.e * my / h;
+}
+
+/* The water at world (X, Z): bilinear between cell centres, clamped to the grid. */
+void lbm_water_at(__global const LBM_FT* f, __global const float* bed,
+                  __local const LbmPressBody* l_b0, const int mask,
+                  __global const float2* foot, const LbmParams p, const float4 origin,
+                  const float X, const float Z, float* H, float* u, float* v)
+{
+    const float gx = clamp((X - origin.x) / p.dx - 0.5f, 0.0f, (float)(p.nx - 1));
+    const float gz = clamp((Z - origin.z) / p.dx - 0.5f, 0.0f, (float)(p.ny - 1));
+    const int i0 = min((int)gx, p.nx - 1), j0 = min((int)gz, p.ny - 1);
+    const int i1 = min(i0 + 1, p.nx - 1), j1 = min(j0 + 1, p.ny - 1);
+    const float fx = gx - (float)i0, fz = gz - (float)j0;
+    float H00, u00, v00, H10, u10, v10, H01, u01, v01, H11, u11, v11;
+    lbm_water_cell(f, bed, l_b0, mask, foot, p, origin, i0, j0, &H00, &u00, &v00);
+    lbm_water_cell(f, bed, l_b0, mask, foot, p, origin, i1, j0, &H10, &u10, &v10);
+    lbm_water_cell(f, bed, l_b0, mask, foot, p, origin, i0, j1, &H01, &u01, &v01);
+    lbm_water_cell(f, bed, l_b0, mask, foot, p, origin, i1, j1, &H11, &u11, &v11);
+    const float w00 = (1.0f - fx) * (1.0f - fz), w10 = fx * (1.0f - fz);
+    const float w01 = (1.0f - fx) * fz, w11 = fx * fz;
+    *H = origin.y + w00 * H00 + w10 * H10 + w01 * H01 + w11 * H11;
+    *u = w00 * u00 + w10 * u10 + w01 * u01 + w11 * u11;
+    *v = w00 * v00 + w10 * v10 + w01 * v01 + w11 * v11;
 }
 
 #define LBM_BODY_ACC 9   /* force (3), torque (3), submerged volume, ring head sum, ring count */
@@ -149,8 +233,10 @@ int4 lbm_body_press_box(const LbmParams p, const float4 origin, const LbmBody* b
 }
 
 /* One work-item's share of the columns of ``body`` at its current pose: force, torque,
- * submerged volume, ring head sum and count added to acc. */
-void lbm_body_columns(__global const LBM_FT* f, __global const float* zforce, const LbmParams p,
+ * submerged volume, ring head sum and count added to acc. The water's head: bed + the pressure
+ * head of the hulls in ``mask`` at the start of the update (l_b0) + depth. */
+void lbm_body_columns(__global const LBM_FT* f, __global const float* bed,
+                      __local const LbmPressBody* l_b0, const int mask, const LbmParams p,
                       __global const float2* foot, const LbmBody* body, const LbmBodyStep s,
                       const int lid, float* acc)
 {
@@ -166,14 +252,14 @@ void lbm_body_columns(__global const LBM_FT* f, __global const float* zforce, co
         float H, uw, vw;
         if (col.y < col.x) {   /* a ring column: the water level around the hull */
             const float3 P = pos + lbm_rot(r0, r1, r2, (float3)(xb, 0.0f, zb));
-            lbm_water_at(f, zforce, p, s.origin, P.x, P.z, &H, &uw, &vw);
+            lbm_water_at(f, bed, l_b0, mask, foot, p, s.origin, P.x, P.z, &H, &uw, &vw);
             acc[7] += H;
             acc[8] += 1.0f;
             continue;
         }
         const float3 Pb = pos + lbm_rot(r0, r1, r2, (float3)(xb, col.x, zb));
         const float3 Pt = pos + lbm_rot(r0, r1, r2, (float3)(xb, col.y, zb));
-        lbm_water_at(f, zforce, p, s.origin, Pb.x, Pb.z, &H, &uw, &vw);
+        lbm_water_at(f, bed, l_b0, mask, foot, p, s.origin, Pb.x, Pb.z, &H, &uw, &vw);
         const float lo = fmin(Pb.y, Pt.y), hi = fmax(Pb.y, Pt.y);
         const float sub = clamp(H - lo, 0.0f, hi - lo);
         if (!(sub > 0.0f)) continue;
@@ -259,74 +345,6 @@ void lbm_body_integrate(LbmBody* body, const float3 Fh, const float3 Th, const f
     body->torque.xyz = Th;   /* torque.w: the still-water level, set by the host */
 }
 
-/* What the pressure kernels need of a body, staged in local memory once per work-group. */
-typedef struct {
-    float4 pos;        /* centre of mass, m; w: bounding radius, m */
-    float4 r0, r1, r2; /* world_from_body rows; r0.w: the still-water level L, m */
-    float4 foot;       /* x0, z0, dfx, dfz */
-    int4 n;            /* nfx, nfz, footprint offset, active */
-} LbmPressBody;
-
-/* Stage body *src in *dst (built in private memory, then copied). */
-void lbm_press_body(__local LbmPressBody* dst, const LbmBody* src)
-{
-    const LbmBody B = *src;
-    float3 r0, r1, r2;
-    lbm_quat_rows(B.quat, &r0, &r1, &r2);
-    LbmPressBody o;
-    o.pos = (float4)(B.pos.xyz, B.damping.w);
-    o.r0 = (float4)(r0, B.torque.w);
-    o.r1 = (float4)(r1, 0.0f);
-    o.r2 = (float4)(r2, 0.0f);
-    o.foot = B.foot;
-    o.n = (int4)(B.foot_n.x, B.foot_n.y, B.foot_n.z, B.flags.x);
-    *dst = o;
-}
-
-/* The cells a body's pressure pass covers: the bounding rectangle of box and box_old. */
-int4 lbm_press_cells(const int4 box, const int4 box_old)
-{
-    return (int4)(min(box.x, box_old.x), min(box.y, box_old.y), max(box.z, box_old.z),
-                  max(box.w, box_old.w));
-}
-
-int lbm_boxes_meet(const int4 a, const int4 b)
-{
-    return a.x <= b.z && b.x <= a.z && a.y <= b.w && b.y <= a.w;
-}
-
-/* The hulls' pressure head (m) at world (X, Z): over the bodies in ``mask`` (bit b: body b, in
- * increasing b), per hull over it, clamp(L - Y_b, 0, Y_t - Y_b) of its nearest footprint column. */
-float lbm_hull_head(__local const LbmPressBody* l_b, const int mask,
-                    __global const float2* restrict foot, const float X, const float Z)
-{
-    float d = 0.0f;
-    for (int m = mask; m != 0; m &= m - 1) {
-        const int b = 31 - clz(m & -m);
-        if (l_b[b].n.w == 0) continue;
-        const float4 pos = l_b[b].pos;
-        const float dxw = X - pos.x, dzw = Z - pos.z;
-        if (dxw * dxw + dzw * dzw > pos.w * pos.w) continue;
-        const float3 r0 = l_b[b].r0.xyz, r1 = l_b[b].r1.xyz, r2 = l_b[b].r2.xyz;
-        const float L = l_b[b].r0.w;
-        const float4 fp = l_b[b].foot;
-        const int4 fn = l_b[b].n;
-        const float3 loc = lbm_rot_t(r0, r1, r2, (float3)(dxw, L - pos.y, dzw));
-        const int ix = (int)round((loc.x - fp.x) / fp.z);
-        const int iz = (int)round((loc.z - fp.y) / fp.w);
-        if (ix < 0 || iz < 0 || ix >= fn.x || iz >= fn.y) continue;
-        const float2 col = foot[fn.z + iz * fn.x + ix];
-        if (col.y < col.x) continue;
-        const float xc = fp.x + (float)ix * fp.z;
-        const float zc = fp.y + (float)iz * fp.w;
-        const float yb = pos.y + dot(r1, (float3)(xc, col.x, zc));
-        const float yt = pos.y + dot(r1, (float3)(xc, col.y, zc));
-        const float lo = fmin(yb, yt), hi = fmax(yb, yt);
-        d += clamp(L - lo, 0.0f, hi - lo);
-    }
-    return d;
-}
-
 /* Cells whose centres may lie in world [X0, X1] x [Z0, Z1], one cell of margin, clamped. */
 int4 lbm_cells_of(const LbmParams p, const float4 origin, const float X0, const float X1,
                   const float Z0, const float Z1)
@@ -383,12 +401,15 @@ void lbm_body_transform(const LbmBody* body, __global Transform* transforms)
     transforms[body->foot_n.w] = t;
 }
 
-/* One bodies update: s.n_sub substeps of s.dt for every body, then its pressure head. One
- * work-group per body (slot); the water does not change between substeps (it is the water of
- * this moment), the pose does. Records are read from ``bodies``, written to ``out`` (every slot
- * up to LBM_MAX_BODIES). A group first finds its body's cluster (the bodies whose reach meets,
- * transitively, all from the records at the start); the lowest body's group updates the whole
- * cluster and presses its boxes, the others return. */
+/* One bodies update: s.n_sub substeps of s.dt for every body, then its pressure head.
+ * G work-groups per body (slot), G = the launch's groups / s.n_bodies: group g is body g / G's
+ * tile g % G.
+ * The water does not change between substeps (it is the water of this moment), the pose does.
+ * Records are read from ``bodies``, written to ``out`` (every slot up to LBM_MAX_BODIES). A
+ * group first finds its body's cluster (the bodies whose reach meets, transitively, all from the
+ * records at the start), updates the whole cluster (every group of every body of the cluster the
+ * same: the same inputs, code and order, so the same bits), then presses its tile of its own
+ * body's cells; tile 0 writes the body's record and transform row. */
 __kernel __attribute__((reqd_work_group_size(LBM_BODY_WG, 1, 1)))
 void lbm_bodies_update(__global const LBM_FT* restrict f, __global float* zforce,
                        __global const float* restrict bed, const LbmParams p,
@@ -399,14 +420,18 @@ void lbm_bodies_update(__global const LBM_FT* restrict f, __global float* zforce
     __local float l_acc[LBM_BODY_ACC][LBM_BODY_WG];
     __local float l_part[LBM_BODY_ACC][LBM_BODY_PARTS];
     __local LbmBody l_body[LBM_MAX_BODIES];
-    __local LbmPressBody l_b[LBM_MAX_BODIES];
+    __local LbmPressBody l_b0[LBM_MAX_BODIES];   /* the hulls at the start: the water read */
+    __local LbmPressBody l_b[LBM_MAX_BODIES];    /* the hulls at the end: the press */
     __local int4 l_read[LBM_MAX_BODIES], l_write[LBM_MAX_BODIES];
     __local int l_adj[LBM_MAX_BODIES];
     __local int l_cluster;
     const int n = min(s.n_bodies, LBM_MAX_BODIES);
-    const int b = get_group_id(0), lid = get_local_id(0);
+    const int groups = max((int)get_num_groups(0) / max(n, 1), 1);   /* per body */
+    const int b = get_group_id(0) / groups, tile = get_group_id(0) - b * groups;
+    const int lid = get_local_id(0);
     if (b >= n) return;   /* uniform over the work-group */
-    if (b == 0 && lid >= n && lid < LBM_MAX_BODIES) out[lid] = bodies[lid];   /* unused slots */
+    if (get_group_id(0) == 0 && lid >= n && lid < LBM_MAX_BODIES)
+        out[lid] = bodies[lid];   /* unused slots */
     if (lid < n) {
         const LbmBody B = bodies[lid];
         l_body[lid] = B;
@@ -415,10 +440,11 @@ void lbm_bodies_update(__global const LBM_FT* restrict f, __global float* zforce
         lbm_body_reach(p, s.origin, &B, s.dt, s.n_sub, &r, &w);
         l_read[lid] = r;
         l_write[lid] = w;
+        lbm_press_body(&l_b0[lid], &B);
     }
     barrier(CLK_LOCAL_MEM_FENCE);
     if (l_body[b].flags.x == 0) {   /* uniform: an empty slot is copied */
-        if (lid == 0) out[b] = l_body[b];
+        if (tile == 0 && lid == 0) out[b] = l_body[b];
         return;
     }
     /* pairs (a, c) of active bodies whose reads and presses can meet */
@@ -440,15 +466,16 @@ void lbm_bodies_update(__global const LBM_FT* restrict f, __global float* zforce
     }
     barrier(CLK_LOCAL_MEM_FENCE);
     const int cluster = l_cluster;
-    if ((cluster & -cluster) != (1 << b)) return;   /* uniform: the lowest body's group works */
 
+    /* the water under a footprint: bed + the cluster's pressure head at the start (what the last
+     * pressure pass wrote into zforce, which other groups of the cluster rewrite meanwhile) */
     for (int mm = cluster; mm != 0; mm &= mm - 1) {
         const int m = 31 - clz(mm & -mm);
         for (int sub = 0; sub < s.n_sub; ++sub) {
             const LbmBody body = l_body[m];
             float acc[LBM_BODY_ACC];
             for (int k = 0; k < LBM_BODY_ACC; ++k) acc[k] = 0.0f;
-            lbm_body_columns(f, zforce, p, foot, &body, s, lid, acc);
+            lbm_body_columns(f, bed, l_b0, cluster, p, foot, &body, s, lid, acc);
             for (int k = 0; k < LBM_BODY_ACC; ++k) l_acc[k][lid] = acc[k];
             barrier(CLK_LOCAL_MEM_FENCE);
             /* LBM_BODY_PARTS partial sums per accumulator, each over a fixed stride */
@@ -473,45 +500,40 @@ void lbm_bodies_update(__global const LBM_FT* restrict f, __global float* zforce
             barrier(CLK_LOCAL_MEM_FENCE);
         }
     }
-    /* the cluster's new records, transforms and boxes; its hulls staged for the press */
+    /* the cluster's new boxes, its hulls staged for the press; tile 0 writes its body's record
+     * and transform row */
     if (lid < n && ((cluster >> lid) & 1)) {
         LbmBody body = l_body[lid];
         body.box_old = body.box;
         body.box = lbm_body_press_box(p, s.origin, &body);
         l_body[lid] = body;
-        out[lid] = body;
-        lbm_body_transform(&body, transforms);
+        if (lid == b && tile == 0) {
+            out[b] = body;
+            lbm_body_transform(&body, transforms);
+        }
         lbm_press_body(&l_b[lid], &body);
     }
     barrier(CLK_LOCAL_MEM_FENCE);
-    /* zforce = bed + the cluster's pressure head over each body's box and box_old (a cell in
-     * several: the lowest body's); no other body presses there */
-    for (int mm = cluster; mm != 0; mm &= mm - 1) {
-        const int m = 31 - clz(mm & -mm);
-        const int4 box = lbm_press_cells(l_body[m].box, l_body[m].box_old);
-        const int lower = cluster & ((1 << m) - 1);
-        const int w = box.z - box.x + 1, area = w * (box.w - box.y + 1);
-        const int di = LBM_BODY_WG % w, dj = LBM_BODY_WG / w;
-        int i = box.x + lid % w, j = box.y + lid / w;
-        for (int c = lid; c < area; c += LBM_BODY_WG) {
-            int mine = 1;
-            for (int o = lower; o != 0; o &= o - 1) {
-                const int ob = 31 - clz(o & -o);
-                const int4 oc = lbm_press_cells(l_body[ob].box, l_body[ob].box_old);
-                if (i >= oc.x && i <= oc.z && j >= oc.y && j <= oc.w) mine = 0;
-            }
-            if (mine) {
-                const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
-                const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
-                const int cell = LBM_CELL(p, i, j);
-                zforce[cell] = bed[cell] + lbm_hull_head(l_b, cluster, foot, X, Z);
-            }
-            i += di;
-            j += dj;
-            if (i > box.z) {
-                i -= w;
-                j += 1;
-            }
+    /* zforce = bed + the cluster's pressure head over this tile of the rectangle holding body
+     * b's box and box_old (cells groups * LBM_BODY_WG apart in row order: cell c is tile
+     * (c / LBM_BODY_WG) % groups's); a cell in several bodies' rectangles is the lowest body's */
+    const int4 box = lbm_press_cells(l_body[b].box, l_body[b].box_old);
+    const int lower = cluster & ((1 << b) - 1);
+    const int w = box.z - box.x + 1, area = w * (box.w - box.y + 1);
+    for (int c0 = tile * LBM_BODY_WG; c0 < area; c0 += groups * LBM_BODY_WG) {
+        const int c = c0 + lid;   /* (a loop uniform over the group: PoCL miscompiled the other) */
+        const int i = box.x + c % w, j = box.y + c / w;
+        int mine = c < area;
+        for (int o = lower; o != 0; o &= o - 1) {
+            const int4 oc = lbm_press_cells(l_body[31 - clz(o & -o)].box,
+                                            l_body[31 - clz(o & -o)].box_old);
+            if (i >= oc.x && i <= oc.z && j >= oc.y && j <= oc.w) mine = 0;
+        }
+        if (mine) {
+            const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
+            const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
+            const int cell = LBM_CELL(p, i, j);
+            zforce[cell] = bed[cell] + lbm_hull_head(l_b, cluster, foot, X, Z);
         }
     }
 }

@@ -11,7 +11,8 @@
 
 #include "transform.h"
 
-/* Work-group size of lbm_bodies_update: one work-group per body (a power of two). */
+/* Work-group size of lbm_bodies_update (a power of two): G work-groups per body slot (the
+ * launch's size says G), each the body's whole update and a tile of its pressure pass. */
 #define LBM_BODY_WG 512
 /* Partial sums per accumulator in the update's reduction (LBM_BODY_WG / 32 terms each). */
 #define LBM_BODY_PARTS 16

@@ -4,15 +4,16 @@ Host side of ``kernels/lbm_bodies.cl``. The host precomputes, once per hull, a c
 description from the closed mesh (:class:`Hull`): volume, centre of mass and principal moments of
 a uniform solid, and a footprint height map (where the hull crosses vertical lines on a small grid
 in body coordinates, ringed by empty columns that measure the water level around the hull).
-:meth:`Boats.enqueue_step` only enqueues one launch for all boats (one work-group per boat,
-every substep in the launch: buoyancy and drag from the water under every column, a local
+:meth:`Boats.enqueue_step` only enqueues one launch for all boats (several work-groups per
+boat, every substep in the launch: buoyancy and drag from the water under every column, a local
 reduction to force and torque, then semi-implicit Euler with added mass, walls, and the pose
-written into the caller's transform buffer as world_from_mesh; then the same work-group presses
-the hull on the water over the cells of its box only: the hulls' pressure head added to the bed
-the water's force sees, so the hull pushes water away, a moving boat makes a wake and a heaving
-one makes waves; water volume is conserved exactly). Boats whose cells can meet within an
-update (known from the start: a horizontal speed limit, :data:`MAX_SPEED`) are updated by one
-work-group, so the launch needs no global synchronisation and is deterministic. Coupled to
+written into the caller's transform buffer as world_from_mesh; then each of the boat's groups
+presses its tile of the hull's box only: the hulls' pressure head added to the bed the water's
+force sees, so the hull pushes water away, a moving boat makes a wake and a heaving one makes
+waves; water volume is conserved exactly). Every group of a boat computes the same update (the
+same inputs and code: the same bits); boats whose cells can meet within an update (known from
+the start: a horizontal speed limit, :data:`MAX_SPEED`) are updated together by each of their
+groups, so the launch needs no global synchronisation and is deterministic. Coupled to
 ``sim.step``, the boats are updated every :attr:`Boats.every` water steps, at most
 ``max_substep`` seconds apart (the coupling lag is bounded in time, not in steps). See
 docs/lbm.md, "Floating bodies".
@@ -43,6 +44,11 @@ BODY_WG = 512
 #: which boats' cells can meet.
 MAX_SPEED = 5.0
 RHO_WATER = 1000.0
+#: Target cells of the pressure pass per work-item (sets the work-groups per boat of an update;
+#: each group also recomputes the boat's reduction, so more groups cost more redundant work).
+PRESS_CELLS = 4.0
+#: Most work-groups per boat in an update.
+MAX_GROUPS = 64
 
 
 class HullError(ValueError):
@@ -347,6 +353,11 @@ class Boats:
                                                     stage="lbm.bodies", defines=defines)
         self._held_s, self._held_steps = 0.0, 0   # water time since the last coupled update
         self._recs: dict = {}   # BodyStep records by their inputs
+        #: Target press cells per work-item (sets :meth:`groups_per_boat`); ``press_groups``:
+        #: a fixed number of work-groups per boat instead (tests, benchmarks).
+        self.press_cells: float = PRESS_CELLS
+        self.press_groups: int | None = None
+        self._groups_key, self._groups = None, 1
         self._depth = None
         self._floor = 0.0
         specs, rows = list(specs), list(rows)
@@ -535,6 +546,28 @@ class Boats:
                 n_sub=n_sub)
         return rec
 
+    def groups_per_boat(self, dt: float) -> int:
+        """Work-groups per boat slot in an update of ``dt`` seconds: :attr:`press_groups` if
+        set, else enough for :attr:`press_cells` cells per work-item over a bound of the
+        cells a boat presses (the rectangle of its bounding circle's box, widened by how far
+        it can move at :data:`MAX_SPEED`; after :meth:`place` its old box can lie farther: its
+        groups then stride over more cells), at most one wave: the device's compute units
+        over the boats (each group of 512 redoes the boat's reduction, so a second wave would
+        cost a second reduction's time)."""
+        if self.press_groups is not None:
+            return int(self.press_groups)
+        key = (dt, tuple(self._slots))
+        if key != self._groups_key:
+            reach = MAX_SPEED * dt * 1.001
+            r = max((float(self._host[k]["damping"][3]) for k in self._slots), default=0.0)
+            side = math.floor(2.0 * (r + reach) / self.sim.dx) + 8
+            area = min(side, self.sim.nx) * min(side, self.sim.ny)
+            cells = BODY_WG * max(float(self.press_cells), 1.0 / BODY_WG)
+            wave = self.rt.device.max_compute_units // max(len(self._slots), 1)
+            self._groups = max(1, min(MAX_GROUPS, wave, math.ceil(area / cells)))
+            self._groups_key = key
+        return self._groups
+
     @property
     def every(self) -> int:
         """Water steps per coupled update: the most whose time fits in ``max_substep``, >= 1."""
@@ -557,12 +590,13 @@ class Boats:
         if self._n == 0 or dt == 0:
             return None
         n_sub = max(1, math.ceil(dt / self.max_substep * (1 - 1e-9)))
+        groups = self.groups_per_boat(dt)
         sim = self.sim
         self._k_update.bind(f=sim.populations_buffer, zforce=self._zforce, bed=sim.bed_buffer,
                             p=sim.params, foot=self._foot, bodies=self._bodies,
                             out=self._bodies_out, transforms=self.transforms,
                             s=self._step_record(dt / n_sub, n_sub))
-        event = self._k_update.launch(self._n * BODY_WG, BODY_WG)
+        event = self._k_update.launch(self._n * groups * BODY_WG, BODY_WG)
         self._bodies, self._bodies_out = self._bodies_out, self._bodies
         return event
 

@@ -179,7 +179,7 @@ def test_launches_per_update_do_not_grow_with_boats(rt, monkeypatch, n_boats):
     sim.step(12)
     ours = [c for c in calls if c[0].startswith("lbm_bodies")]
     assert [c[0] for c in ours] == ["lbm_bodies_update"] * 4
-    assert all(c[1] == (n_boats * lb.BODY_WG,) for c in ours)
+    assert all(c[1] == (n_boats * boats.groups_per_boat(3 * sim.dt) * lb.BODY_WG,) for c in ours)
     calls.clear()
     boats.enqueue_step(5 * boats.max_substep)
     assert [c[0] for c in calls] == ["lbm_bodies_update"]
@@ -311,3 +311,41 @@ def test_updates_are_the_same_bytes_on_a_rerun(rt):
                 sim.populations().tobytes())
 
     assert once() == once()
+
+
+def test_several_groups_per_boat_press_what_one_group_and_the_whole_grid_do(rt):
+    """A lone boat thrown across the pool and two whose boxes overlap (a cluster), on a grid
+    fine enough that a boat presses over 512 cells, updated by 3 work-groups per boat (each
+    recomputes the cluster's update, then presses its tile): after every update the pressure
+    head is the bytes the whole-grid pass leaves, and records, transform rows and pressure head
+    are the bytes that one work-group per boat leaves, on a rerun too."""
+    def once(groups):
+        sim = br.pool(rt, dx=0.02, size=(2.4, 1.2), drag=0.0)
+        V, F = br.box(0.5, 0.3, 0.3)
+        specs = [BoatSpec(V, F, mass=12.0, position=p, mass_height=0.08, rotation=_rot(r))
+                 for p, r in (((0.6, 0.52, 0.6), 0.3), ((1.65, 0.52, 0.45), 0.0),
+                              ((1.85, 0.52, 0.8), 0.5))]
+        T = rt.buffer(48 * 3)
+        boats = Boats(sim, specs, T, [0, 1, 2], coupled=False)
+        boats.press_groups = groups
+        boats.set_velocity(0, (3.0, 0.0, 0.4))
+        boats.set_velocity(2, (-0.5, 0.0, 0.0))
+        heads = []
+        for _ in range(4):
+            sim.step(2)
+            boats.enqueue_step(2 * sim.dt)
+            head = boats.pressure_head()
+            boats.enqueue_press()
+            assert head.tobytes() == boats.pressure_head().tobytes()
+            heads.append(head.tobytes())
+        st = boats.state()
+        box = np.minimum(st["box"][:, :2], st["box_old"][:, :2])
+        box_hi = np.maximum(st["box"][:, 2:], st["box_old"][:, 2:])
+        area = np.prod(box_hi - box + 1, axis=1)
+        assert area.min() > lb.BODY_WG                        # every boat's pass spans 2+ tiles
+        assert st["box"][1, 2] >= st["box"][2, 0] and st["pos"][0, 0] > 0.65   # overlap; moved
+        return st.tobytes(), rt.to_host(T, np.float32, 36).tobytes(), heads
+
+    one = once(1)
+    assert once(3) == one
+    assert once(3) == one
