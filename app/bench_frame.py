@@ -42,7 +42,11 @@ def add_arguments(p) -> None:
                    help="float N copies of the scene's first [[boats]] (0.5 m, in a grid) to "
                         "time the bodies stage; default: the scene's boats")
     p.add_argument("--per-depth", action="store_true",
-                   help="time the renderer's stages per depth level (render.shadow.d0, ...)")
+                   help="time the renderer's stages per depth level (render.trace.d0, "
+                        "render.shadow_trace.d1, ...)")
+    p.add_argument("--no-overlap", action="store_true",
+                   help="launch each depth level's shadow rays alone, not with the next level's "
+                        "trace (RenderSettings.overlap_levels off: an A/B of the same image)")
     p.add_argument("--host-copy", action="store_true",
                    help="copy each image out of the pinned read-back array and check its pixels "
                         "inside the timed loop (the cost a read_frame() caller adds)")
@@ -105,6 +109,8 @@ def run(args) -> int:
                       rebuild_water_bvh=args.rebuild, caustics=args.caustics)
         if getattr(args, "per_depth", False):
             world.renderer.set_stage_per_depth(True)
+        if getattr(args, "no_overlap", False):
+            world.renderer.set_overlap(False)
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -147,6 +153,7 @@ def run(args) -> int:
                "triangles": st.n_triangles, "width": args.size[0],
                "height": args.size[1], "lbm_steps_per_frame": round(statistics.mean(steps), 3),
                "bvh": "rebuild" if args.rebuild else "refit", "host_copy": host_copy,
+               "overlap": world.renderer.settings.overlap_levels,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,
                "rays_per_depth": " ".join(str(n) for n in st.rays_per_depth),

@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from app.cli import main
 
 
@@ -44,14 +46,21 @@ def test_bench_frame_photons_sets_the_caustic_photons_and_times_them(tmp_path, c
     assert "--photons 0 is out of range" in capsys.readouterr().err
 
 
-def test_bench_frame_per_depth_stages(tmp_path):
+@pytest.mark.parametrize("overlap", [True, False])
+def test_bench_frame_per_depth_stages(tmp_path, overlap):
     out = tmp_path / "res"
     assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
                  "--warmup", "1", "--frame-time", "0.1", "--caustics", "off", "--per-depth",
-                 "--out", str(out)]) == 0
+                 *([] if overlap else ["--no-overlap"]), "--out", str(out)]) == 0
     r = json.loads((out / "bench_frame.json").read_text())[0]
     depths = [int(n) for n in r["rays_per_depth"].split()]
     assert depths[0] == 48 * 32 and len(depths) == 6  # the pool's 5 bounces
-    assert r["render.trace.d0_ms"] > 0 and r["render.shadow.d0_ms"] > 0
-    assert r["render.trace_secondary.d1_ms"] > 0 and r["render.shadow.d5_ms"] >= 0
+    assert r["overlap"] is overlap and r["render.trace.d0_ms"] > 0
+    assert r["render.shadow.d5_ms"] >= 0   # the last level's shadow rays run alone either way
+    if overlap:   # level d's shadow rays with level d + 1's trace
+        assert r["render.shadow_trace.d1_ms"] > 0 and r["render.shadow_trace.d5_ms"] >= 0
+        assert "render.shadow.d0_ms" not in r and "render.trace_secondary.d1_ms" not in r
+    else:
+        assert r["render.shadow.d0_ms"] > 0 and r["render.trace_secondary.d1_ms"] > 0
+        assert not any(k.startswith("render.shadow_trace") for k in r)
     assert "render.shadow_ms" not in r and "render.trace_ms" not in r

@@ -10,8 +10,8 @@ import pytest
 from raytrace.bvh import HIT_DTYPE
 from raytrace.render import BYTES_PER_RAY_SLOT, Renderer, RenderSettings
 from raytrace.render_scene import Material, RenderScene
-from tests.raytrace.test_render_plans import BOX, CAMERAS, build
 from tests.raytrace.test_render_dynamic import grid, surface
+from tests.raytrace.test_render_plans import BOX, CAMERAS, build
 
 
 def glass_without_lights(rt):
