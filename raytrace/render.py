@@ -14,13 +14,31 @@ the ray buffers would not fit in device memory):
       render.gather    children scattered into the next wavefront; each pixel gathers its rays'
                        radiance (rays stay sorted by pixel); after the last level, tonemap + sRGB
 
+That is the order with ``overlap_levels`` off. On (the default), level d's shadow rays and level
+d + 1's trace, independent once level d's children are scattered, share one launch
+(render.shadow_trace, named after level d + 1), so the tail levels' few shadow rays cost no
+traversal latency of their own (NVIDIA runs no two kernels of one queue at once):
+
+    render.trace, render.shade                                    level 0
+    per depth d < deepest:
+      render.secondary, render.gather (scatter only)              children of level d
+      render.shadow_trace  level d's shadow rays + level d+1's trace (and shade, fused)
+      render.gather (accumulate only)                             level d into the framebuffer
+      render.shade                                                level d+1 (unless fused)
+    render.shadow, render.gather, tonemap                         the deepest level
+
+The levels' hits then live in two buffers by parity (level d's shadow rays read theirs while
+d + 1 traces), and with ``fuse_trace_shade`` the radiance too; unfused, level d + 1's shade runs
+after level d's accumulation on the in-order queue and one radiance buffer serves.
+
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
-the shading). Every kernel (``kernels.launch.Kernel``) belongs to this renderer (one per depth
-level; the tonemap pass has its own gather object) and its arguments are bound by name when the
-scene's buffers change; per-launch values are the by-value RaygenParams/GatherParams records.
+the shading), either order. Every kernel (``kernels.launch.Kernel``) belongs to this renderer
+(one per depth level; the tonemap pass and the scatter alone have their own gather objects) and
+its arguments are bound by name when the scene's buffers change; per-launch values are the
+by-value RaygenParams/GatherParams records.
 The frame's launches are a plan (kernel, sizes, stage; binds between them where several chunks
-need them) made once per launch sizes, depth, lights and bindings, and replayed each frame as
-bare enqueues. Per-ray kernels loop with a grid stride over the device-side count and are
+need them) made once per launch sizes, depth, lights, order and bindings, and replayed each frame
+as bare enqueues. Per-ray kernels loop with a grid stride over the device-side count and are
 launched for about the last arrived count (``size_hints``) rather than every slot: any size
 gives the same image.
 
