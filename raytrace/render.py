@@ -206,8 +206,7 @@ class Renderer:
         self.capacity = max(self.n_primary_max,
                             int(math.ceil(s.capacity_factor * self.n_primary_max)))
         cap = self.capacity
-        check_fits(rt, cap * bytes_per_ray_slot(s) + self.n_pixels * (20 + s.aov * AOV.itemsize),
-                   f"render {s.width}x{s.height}", largest=16 * self.n_pixels)  # kernels.limits
+        self._check_fits()  # kernels.limits
         self.rays = [rt.buffer(cap * RAY.itemsize), rt.buffer(cap * RAY.itemsize)]
         # the hits and radiance of the levels of each parity (one buffer for both unless two
         # levels' are live at once: _level_buffers)
@@ -264,9 +263,9 @@ class Renderer:
                 depths.append((rnd(launch_n), (blocks * SCAN_WG,), rnd(nq)))
                 launch_n = min(self.capacity, 2 * launch_n)
             raygen = np.array([(q0, n_rays, int(q0 == 0), 0)], RAYGEN_PARAMS)[0]
-            # the GatherParams (scatter, accumulate, q0, n_q, finish) of a level that scatters,
-            # of the last level (accumulate only), of the tonemap pass after it, and of a
-            # scatter alone (overlap_levels: the accumulation follows the shadow rays)
+            # the GatherParams (scatter, accumulate, q0, n_q, finish) of a level that scatters
+            # and accumulates, of an accumulation alone (the last level; overlap_levels: every
+            # level, after its shadow rays), of the tonemap pass, and of a scatter alone
             gather = tuple(np.array([(sc, acc, q0, nq, fin)], GATHER_PARAMS)[0]
                            for sc, acc, fin in ((1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 0)))
             self._plan.append((raygen, gather, (max(n_rays, STATS_LEN),), depths))
@@ -293,6 +292,13 @@ class Renderer:
             sizes = self._sizes[key] = tuple(sizes)
         return sizes
 
+    def _check_fits(self) -> None:
+        """One-line DeviceLimitError when the ray slots and per-pixel buffers do not fit."""
+        s = self.settings
+        check_fits(self.rt, self.capacity * bytes_per_ray_slot(s)
+                   + self.n_pixels * (20 + s.aov * AOV.itemsize),
+                   f"render {s.width}x{s.height}", largest=16 * self.n_pixels)
+
     def _level_buffers(self) -> None:
         """With ``overlap_levels``, the odd levels' hits (and, fused, radiance) in buffers of
         their own: render.shadow_trace traces (and shades) level d + 1 while level d's shadow
@@ -317,8 +323,7 @@ class Renderer:
             return
         self.settings = dataclasses.replace(self.settings, overlap_levels=on)
         if on:
-            check_fits(self.rt, self.capacity * bytes_per_ray_slot(self.settings),
-                       f"render {self.settings.width}x{self.settings.height}")
+            self._check_fits()
             self._level_buffers()
         self._bound_sig = None  # rebind: the kernels of the new order, to these buffers
 
@@ -528,7 +533,7 @@ class Renderer:
             ops.append((self._BIND, k, values))
 
         trace = "trace_shade" if s.fuse_trace_shade else "trace"
-        for (rp, (g_scatter, g_last, g_finish, g_scatter_only), raygen_size, _), sz in zip(
+        for (rp, (g_both, g_accumulate, g_finish, g_scatter), raygen_size, _), sz in zip(
                 self._plan, sizes, strict=True):
             bind(self.k_raygen, rp=rp)
             launch(self.k_raygen, raygen_size, None)
@@ -546,10 +551,10 @@ class Renderer:
                         launch(k["shadow"], ray_size, ls)
                     if depth < deepest:
                         launch(k["scan"], scan_size, scan_ls)
-                        bind(k["gather"], gp=g_scatter)
+                        bind(k["gather"], gp=g_both)
                         launch(k["gather"], scatter_size, ls)
                     else:
-                        bind(k["gather"], gp=g_last)
+                        bind(k["gather"], gp=g_accumulate)
                         launch(k["gather"], scatter_size, ls)
                         bind(k["finish"], gp=g_finish)
                         launch(k["finish"], pixel_size, ls)
@@ -559,13 +564,13 @@ class Renderer:
                 nxt = ks[depth + 1]
                 next_size = sz[depth + 1][0]
                 launch(k["scan"], scan_size, scan_ls)
-                bind(k["scatter"], gp=g_scatter_only)
+                bind(k["scatter"], gp=g_scatter)
                 launch(k["scatter"], scatter_size, ls)
                 if has_lights:
                     launch(nxt["shadow_" + trace], (ray_size[0] + next_size[0],), ls)
                 else:
                     launch(nxt[trace], next_size, ls)
-                bind(k["gather"], gp=g_last)
+                bind(k["gather"], gp=g_accumulate)
                 launch(k["gather"], scatter_size, ls)
                 if not s.fuse_trace_shade:
                     launch(nxt["shade"], next_size, ls)
