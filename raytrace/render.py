@@ -27,7 +27,8 @@ traversal latency of their own (NVIDIA runs no two kernels of one queue at once)
       render.shade                                                level d+1 (unless fused)
     render.shadow, render.gather, tonemap                         the deepest level
 
-The levels' hits then live in two buffers by parity (level d's shadow rays read theirs while
+``overlap_from`` D keeps the levels before D in the first order (their shadow rays alone), e.g.
+to overlap only the tail levels of few rays. The levels' hits then live in two buffers by parity (level d's shadow rays read theirs while
 d + 1 traces), and with ``fuse_trace_shade`` the radiance too; unfused, level d + 1's shade runs
 after level d's accumulation on the in-order queue and one radiance buffer serves.
 
@@ -109,11 +110,13 @@ class RenderSettings:
     fuse_trace_shade: bool = False  #: one kernel traces and shades (render.trace includes shade)
     overlap_levels: bool = True   #: shadow rays of level d and trace of d + 1 in one launch
                                   #: (render.shadow_trace; the same image, one hit buffer more)
+    overlap_from: int = 0         #: with overlap_levels, the first level d whose shadow rays
+                                  #: go with level d + 1's trace (the levels before: alone)
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
         for name, lo, hi in (("width", 1, 16384), ("height", 1, 16384), ("spp", 1, 4096),
-                             ("bounces", 0, MAX_DEPTH)):
+                             ("bounces", 0, MAX_DEPTH), ("overlap_from", 0, MAX_DEPTH)):
             v = getattr(self, name)
             if not isinstance(v, int | np.integer) or not lo <= v <= hi:
                 raise ValueError(f"render {name} must be an integer in [{lo}, {hi}], got {v!r}")
@@ -206,7 +209,7 @@ class Renderer:
         self.capacity = max(self.n_primary_max,
                             int(math.ceil(s.capacity_factor * self.n_primary_max)))
         cap = self.capacity
-        self._check_fits()  # kernels.limits
+        self._check_fits(s)  # kernels.limits
         self.rays = [rt.buffer(cap * RAY.itemsize), rt.buffer(cap * RAY.itemsize)]
         # the hits and radiance of the levels of each parity (one buffer for both unless two
         # levels' are live at once: _level_buffers)
@@ -292,9 +295,8 @@ class Renderer:
             sizes = self._sizes[key] = tuple(sizes)
         return sizes
 
-    def _check_fits(self) -> None:
+    def _check_fits(self, s: RenderSettings) -> None:
         """One-line DeviceLimitError when the ray slots and per-pixel buffers do not fit."""
-        s = self.settings
         check_fits(self.rt, self.capacity * bytes_per_ray_slot(s)
                    + self.n_pixels * (20 + s.aov * AOV.itemsize),
                    f"render {s.width}x{s.height}", largest=16 * self.n_pixels)
@@ -314,17 +316,20 @@ class Renderer:
         if s.fuse_trace_shade and self.radiance[1] is self.radiance[0]:
             self.radiance = [self.radiance[0], self.rt.buffer(cap * 16)]
 
-    def set_overlap(self, on: bool = True) -> None:
-        """Turn ``overlap_levels`` on or off for the next frames (an A/B switch: bench frame
-        --no-overlap). On after a renderer made without it allocates the second hit buffer
+    def set_overlap(self, on: bool = True, first: int | None = None) -> None:
+        """Turn ``overlap_levels`` on or off for the next frames, overlapping from level
+        ``first`` (None: keep ``overlap_from``); an A/B switch (bench frame --no-overlap,
+        --overlap-from). On after a renderer made without it allocates the second hit buffer
         (and radiance, fused) then; the image is the same either way."""
-        on = bool(on)
-        if on == self.settings.overlap_levels:
+        first = self.settings.overlap_from if first is None else first
+        new = dataclasses.replace(self.settings, overlap_levels=bool(on), overlap_from=first)
+        new = new.resolved()   # one-line ValueError for a bad level
+        if new == self.settings:
             return
-        self.settings = dataclasses.replace(self.settings, overlap_levels=on)
-        if on:
-            self._check_fits()
-            self._level_buffers()
+        if new.overlap_levels and not self.settings.overlap_levels:
+            self._check_fits(new)
+        self.settings = new
+        self._level_buffers()
         self._bound_sig = None  # rebind: the kernels of the new order, to these buffers
 
     def set_stage_per_depth(self, on: bool = True) -> None:
@@ -499,7 +504,7 @@ class Renderer:
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
         sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
-               s.overlap_levels, self._bind_version)
+               s.overlap_levels, s.overlap_from, self._bind_version)
         ops = self._plans.get(key)
         if ops is None:
             if len(self._plans) >= 16:
@@ -533,6 +538,10 @@ class Renderer:
             ops.append((self._BIND, k, values))
 
         trace = "trace_shade" if s.fuse_trace_shade else "trace"
+
+        def overlapped(d: int) -> bool:   # level d's shadow rays go with level d + 1's trace
+            return s.overlap_levels and s.overlap_from <= d < deepest
+
         for (rp, (g_both, g_accumulate, g_finish, g_scatter), raygen_size, _), sz in zip(
                 self._plan, sizes, strict=True):
             bind(self.k_raygen, rp=rp)
@@ -540,13 +549,13 @@ class Renderer:
             for depth in range(deepest + 1):
                 k = ks[depth]
                 ray_size, scan_size, scatter_size, pixel_size = sz[depth]
-                if depth == 0 or not s.overlap_levels:  # else traced with the last level
+                if depth == 0 or not overlapped(depth - 1):  # else traced with the last
                     launch(k[trace], ray_size, ls)
                     if depth == 0 and rp["zero_stats"]:
                         ops.append((self._FLUSH,))  # the device starts while the rest is queued
                     if not s.fuse_trace_shade:
                         launch(k["shade"], ray_size, ls)
-                if depth == deepest or not s.overlap_levels:
+                if not overlapped(depth):
                     if has_lights:
                         launch(k["shadow"], ray_size, ls)
                     if depth < deepest:

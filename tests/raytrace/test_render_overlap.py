@@ -66,10 +66,15 @@ def test_set_overlap_switches_the_order_and_keeps_the_image(rt):
     r.set_overlap(True)
     assert r.hits[0] is not r.hits[1] and r.radiance[0] is r.radiance[1]
     assert r.memory_report()["bytes_per_ray_slot"] == 136 + HIT_DTYPE.itemsize
-    for on in (True, False, True):
-        r.set_overlap(on)
-        assert np.array_equal(r.render(), want), on
-        assert ("render.shadow_trace" in stages(r)) == on
+    for on, first, combined in ((True, 0, 2), (False, 0, 0), (True, 1, 1), (True, 2, 0),
+                                (True, None, 0)):
+        r.set_overlap(on, first)
+        assert np.array_equal(r.render(), want), (on, first)
+        # levels 0..2: level d < overlap_from (and the last) shoot their shadow rays alone
+        assert stages(r).count("render.shadow_trace") == combined, (on, first)
+        assert stages(r).count("render.shadow") == 3 - combined, (on, first)
+    with pytest.raises(ValueError, match="overlap_from must be an integer"):
+        r.set_overlap(True, -1)
 
 
 def test_fused_overlap_double_buffers_the_radiance(rt):
