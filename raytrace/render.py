@@ -28,9 +28,10 @@ traversal latency of their own (NVIDIA runs no two kernels of one queue at once)
     render.shadow, render.gather, tonemap                         the deepest level
 
 ``overlap_from`` D keeps the levels before D in the first order (their shadow rays alone), e.g.
-to overlap only the tail levels of few rays. The levels' hits then live in two buffers by parity (level d's shadow rays read theirs while
-d + 1 traces), and with ``fuse_trace_shade`` the radiance too; unfused, level d + 1's shade runs
-after level d's accumulation on the in-order queue and one radiance buffer serves.
+to overlap only the tail levels of few rays. The levels' hits live in two buffers by parity
+(level d's shadow rays read theirs while d + 1 traces), and with ``fuse_trace_shade`` the
+radiance too; unfused, level d + 1's shade runs after level d's accumulation on the in-order
+queue and one radiance buffer serves.
 
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
 the shading), either order. Every kernel (``kernels.launch.Kernel``) belongs to this renderer
