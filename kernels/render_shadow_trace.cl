@@ -2,11 +2,12 @@
  * one launch (RenderSettings.overlap_levels). The two are independent once the children of
  * level depth - 1 are scattered, and NVIDIA's OpenCL runs no two kernels of one in-order queue at
  * once: in one launch, the tail levels' few shadow rays no longer cost a traversal chain of
- * latency of their own. Work-item j of a grid-stride loop over counts[depth - 1] + counts[depth]
- * does shadow ray j of level depth - 1 (j < counts[depth - 1]), else traces ray j - counts[depth - 1]
- * of level depth: the same per-ray bodies as render_shadow (render_shadow.h) and render_trace /
- * render_trace_shade (render_trace.h, shade_hit), so the image is the same byte for byte. The
- * levels' hits (and, shaded here, their radiance) live in buffers of their own parity. */
+ * latency of their own. Work-item j of a grid-stride loop over counts[depth - 1] +
+ * counts[depth] does shadow ray j of level depth - 1 (j < counts[depth - 1]), else traces ray
+ * j - counts[depth - 1] of level depth: the same per-ray bodies as render_shadow
+ * (render_shadow.h) and render_trace / render_trace_shade (render_trace.h, shade_hit), so the
+ * image is the same byte for byte. The levels' hits (and, shaded here, their radiance) live in
+ * buffers of their own parity. */
 #include "common.h"
 #include "render_shadow.h"
 #include "render_surface.h"
