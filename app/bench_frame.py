@@ -42,7 +42,13 @@ def add_arguments(p) -> None:
                    help="float N copies of the scene's first [[boats]] (0.5 m, in a grid) to "
                         "time the bodies stage; default: the scene's boats")
     p.add_argument("--per-depth", action="store_true",
-                   help="time the renderer's stages per depth level (render.shadow.d0, ...)")
+                   help="time the renderer's stages per depth level (render.trace.d0, "
+                        "render.shadow_trace.d1, ...)")
+    p.add_argument("--no-overlap", action="store_true",
+                   help="launch each depth level's shadow rays alone, not with the next level's "
+                        "trace (RenderSettings.overlap_levels off: an A/B of the same image)")
+    p.add_argument("--overlap-from", type=int, default=0, metavar="D",
+                   help="overlap only the levels from depth D on (RenderSettings.overlap_from)")
     p.add_argument("--host-copy", action="store_true",
                    help="copy each image out of the pinned read-back array and check its pixels "
                         "inside the timed loop (the cost a read_frame() caller adds)")
@@ -88,6 +94,7 @@ def run(args) -> int:
     from app.scene import load_scene
     from app.world import World
     from kernels import get_runtime
+    from raytrace.render_types import MAX_DEPTH
 
     scene = load_scene(args.scene)
     if scene.water is None:
@@ -98,6 +105,9 @@ def run(args) -> int:
         if not 1 <= args.photons <= 2**26:
             raise InputError(f"--photons {args.photons} is out of range; allowed [1, {2**26}]")
         scene = with_shading(scene, {"caustic_photons": args.photons})
+    overlap_from = getattr(args, "overlap_from", 0)
+    if not 0 <= overlap_from <= MAX_DEPTH:
+        raise InputError(f"--overlap-from {overlap_from} is out of range; allowed [0, {MAX_DEPTH}]")
     rt = get_runtime(args.device)
     rows = []
     for cells in args.cells:
@@ -105,6 +115,7 @@ def run(args) -> int:
                       rebuild_water_bvh=args.rebuild, caustics=args.caustics)
         if getattr(args, "per_depth", False):
             world.renderer.set_stage_per_depth(True)
+        world.renderer.set_overlap(not getattr(args, "no_overlap", False), overlap_from)
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -147,6 +158,8 @@ def run(args) -> int:
                "triangles": st.n_triangles, "width": args.size[0],
                "height": args.size[1], "lbm_steps_per_frame": round(statistics.mean(steps), 3),
                "bvh": "rebuild" if args.rebuild else "refit", "host_copy": host_copy,
+               "overlap": world.renderer.settings.overlap_levels,
+               "overlap_from": world.renderer.settings.overlap_from,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,
                "rays_per_depth": " ".join(str(n) for n in st.rays_per_depth),

@@ -29,11 +29,12 @@ SEED_MS = {
 SEED_BYTES_PER_RAY = 144
 
 #: Our stage names -> the seed's table columns (with fuse_trace_shade, render.trace and
-#: render.trace_secondary include the shading of their hits).
+#: render.trace_secondary include the shading of their hits; with overlap_levels, the shadows
+#: include the secondary traces launched with them, render.shadow_trace).
 COLUMNS = {
     "ray_creation": ("render.raygen",),
     "primary_trace": ("render.trace",),
-    "shadows": ("render.shadow",),
+    "shadows": ("render.shadow", "render.shadow_trace"),
     "secondary_trace": ("render.trace_secondary",),
     "shading": ("render.shade", "render.secondary", "render.gather"),
 }

@@ -31,11 +31,13 @@ from app.errors import InputError
 SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
 #: The seed's water demo (LBM on the CPU, heights copied every frame): grid side -> FPS.
 SEED_FPS = {100: 18.0, 200: 12.0, 300: 6.0}
-#: Stage groups of the stacked chart, in drawing order: (label, name prefixes).
+#: Stage groups of the stacked chart, in drawing order: (label, name prefixes). With the
+#: renderer's overlap_levels, "shadows" also holds the secondary traces launched with them
+#: (render.shadow_trace).
 STAGE_GROUPS = (("lbm", ("lbm.step", "lbm.guard", "lbm.sources")), ("surface", ("lbm.surface",)),
                 ("bvh", ("bvh.",)), ("primary trace", ("render.trace",)),
-                ("shadows", ("render.shadow",)), ("secondary", ("render.trace_secondary",
-                                                                "render.secondary")),
+                ("shadows", ("render.shadow", "render.shadow_trace")),
+                ("secondary", ("render.trace_secondary", "render.secondary")),
                 ("shade + gather", ("render.shade", "render.gather")), ("other", ()))
 KEY = ("scene", "device", "cells", "width", "height", "bounces", "spp", "frames", "warmup",
        "frame_time")

@@ -23,7 +23,7 @@ __kernel void caustics_clear(__global uint* restrict accum, const CausticParams 
     for (uint i = get_global_id(0); i < n; i += get_global_size(0)) accum[i] = 0u;
 }
 
-inline float cone01(float e0, float e1, float x)   /* render_shade.cl's smooth01 */
+inline float cone01(float e0, float e1, float x)   /* render_shadow.h's smooth01 */
 {
     const float t = clamp((x - e0) / fmax(e1 - e0, 1e-7f), 0.0f, 1.0f);
     return t * t * (3.0f - 2.0f * t);

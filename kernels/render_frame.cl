@@ -1,7 +1,7 @@
-/* Renderer framebuffer stage, one launch per depth level: the next wavefront's rays (scatter of
- * the compacted children, render_secondary.cl) and race-free accumulation (the first ray of each
- * pixel's run sums the run: rays stay sorted by pixel through every compaction); after the last
- * level of a chunk, a second launch tonemaps the chunk's pixels to RGBA8. */
+/* Renderer framebuffer stage, one or two launches per depth level: the next wavefront's rays
+ * (scatter of the compacted children, render_secondary.cl) and race-free accumulation (the first
+ * ray of each pixel's run sums the run: rays stay sorted by pixel through every compaction);
+ * after the last level of a chunk, a second launch tonemaps the chunk's pixels to RGBA8. */
 #include "common.h"
 #include "render_surface.h"
 
@@ -31,7 +31,9 @@ inline void accumulate_run(__constant const Camera* cam, __global const Ray* ray
 
 /* Grid-stride over k. gp.finish: pixel q0 + k (k < n_q) is tonemapped to RGBA8 (after the
  * chunk's last level was accumulated). Otherwise ray k (k < n): its children go into `out`
- * (gp.scatter) and, if it starts its pixel's run, the run is accumulated. */
+ * (gp.scatter) and, if it starts its pixel's run, the run is accumulated (gp.accumulate). The
+ * scatter reads no radiance: with RenderSettings.overlap_levels it runs before the level's shadow
+ * rays (render_shadow_trace.cl), the accumulation after them. */
 __kernel void render_gather(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
                             __constant const Camera* cam, __global const Ray* rays,
                             __global const Hit* hits, __global const uint* counts,
@@ -54,6 +56,6 @@ __kernel void render_gather(RENDER_GEOM_PARAMS, __constant const RenderParams* p
         if (gp.scatter)
             scatter_children(RENDER_GEOM_ARGS, prm, rays, hits, k, depth, child_offsets,
                              block_sums, out);
-        accumulate_run(cam, rays, n, depth, k, radiance, fb);
+        if (gp.accumulate) accumulate_run(cam, rays, n, depth, k, radiance, fb);
     }
 }

@@ -4,14 +4,7 @@
  * on the H100 (measured 2026-11-23). Both loop with a grid stride (see render_trace.cl). */
 #include "common.h"
 #include "render_surface.h"
-#include "traverse.h"
-#include "caustics.h"
-
-inline float smooth01(float e0, float e1, float x)
-{
-    const float t = clamp((x - e0) / fmax(e1 - e0, 1e-7f), 0.0f, 1.0f);
-    return t * t * (3.0f - 2.0f * t);
-}
+#include "render_shadow.h"
 
 __kernel void render_shade(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
                            __constant const Camera* cam, __global const Ray* restrict rays,
@@ -24,104 +17,6 @@ __kernel void render_shade(RENDER_GEOM_PARAMS, __constant const RenderParams* pr
     for (uint i = get_global_id(0); i < n; i += get_global_size(0))
         shade_hit(RENDER_GEOM_ARGS, prm, cam, rays[i], hits[i], i, depth, radiance, child_counts,
                   aov, write_aov);
-}
-
-/* Fraction of light reaching org along dir within tmax. Opaque scenes: one any-hit query.
- * With dielectrics (transmissive_shadows), the ray goes straight through up to
- * RENDER_MAX_SHADOW_CROSSINGS dielectric surfaces, times (1 - Fresnel) at each and Beer-Lambert
- * inside (no refraction bending: no caustics). There, first an any-hit query of the opaque-only
- * instances (RENDER_MASK_OPAQUE: it ends at the first blocker and never enters the water's
- * tree), then the crossings, closest hit by closest hit, of the instances that hold a
- * dielectric (RENDER_MASK_TRANSMISSIVE; an opaque triangle there still blocks). */
-inline float3 shadow_transmittance(SCENE_PARAMS, RENDER_GEOM_PARAMS,
-                                   __constant const RenderParams* prm, float3 org, float3 dir,
-                                   float tmax, int medium)
-{
-    /* one any-hit call site for both cases (one traversal less inlined) */
-    const uint opaque = prm->transmissive_shadows ? RENDER_MASK_OPAQUE : ~0u;
-    if (scene_any_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))
-        return (float3)(0.0f);
-    if (!prm->transmissive_shadows) return (float3)(1.0f);
-    float3 T = (float3)(1.0f);
-    for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
-        const Hit h = scene_closest_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax,
-                                               RENDER_MASK_TRANSMISSIVE,
-                                               TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
-        if (h.prim < 0) {
-            if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
-            return T;
-        }
-        const Surface s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
-        const Material m = g_mat[s.material];
-        if (!is_dielectric(&m)) return (float3)(0.0f);
-        if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, h.t);
-        float3 nf_g, nf_s;
-        facing_normals(&s, dir, &nf_g, &nf_s);
-        const bool entering = dot(dir, s.ng) < 0.0f;
-        const float eta = entering ? 1.0f / m.absorption.w : m.absorption.w;
-        T *= 1.0f - fresnel(prm->fresnel, -dot(dir, nf_g), eta);
-        medium = entering ? s.material : RENDER_NO_MEDIUM;
-        org = offset_ray(s.p, -nf_g);
-        tmax -= h.t;
-    }
-    return (float3)(0.0f);
-}
-
-inline void shadow_ray(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
-                       __global const Light* restrict lights, __global const Ray* restrict rays,
-                       __global const Hit* restrict hits, uint i,
-                       __global float4* restrict radiance,
-                       __global const float4* restrict caustic_map, const CausticParams* cp)
-{
-    const Hit h = hits[i];
-    if (h.prim < 0 || prm->n_lights == 0) return;
-    const Ray r = rays[i];
-    const Surface s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
-    const Material m = g_mat[s.material];
-    const float3 w = attenuated_weight(&r, h.t, g_mat) * direct_fraction(&m);
-    if (max3(w) <= 0.0f) return;
-    const float3 d = ray_dir(&r);
-    float3 nf_g, nf_s;
-    facing_normals(&s, d, &nf_g, &nf_s);
-    const float3 org = offset_ray(s.p, nf_g);
-    float3 sum = (float3)(0.0f);
-    /* a pool surface seen through the water: the caustic map carries its lights (caustics.cl) */
-    const bool caustic = cp->enabled && h.inst == cp->pool_instance && r.medium >= 0;
-    if (caustic) sum = caustic_lookup(caustic_map, cp, s.p, nf_g) * s.kd;
-    for (uint l = 0; l < prm->n_lights; l++) {
-        if (caustic && ((cp->light_mask >> l) & 1u)) continue;
-        const Light li = lights[l];
-        float3 ldir, E;
-        float dist;
-        if (li.kind == LIGHT_SPOT) {
-            const float3 to = li.position.xyz - s.p;
-            dist = length(to);
-            ldir = to / dist;
-            E = li.color.xyz * (smooth01(li.cos_outer, li.cos_inner, dot(-ldir, li.direction.xyz))
-                                / (dist * dist));
-        } else {
-            ldir = -li.direction.xyz;
-            dist = INFINITY;
-            E = li.color.xyz;
-        }
-        const float ndl = dot(nf_s, ldir);
-        if (ndl <= 0.0f || dot(nf_g, ldir) <= 0.0f || max3(E) <= 0.0f) continue;
-        const float rv = fmax(dot(reflect_dir(-ldir, nf_s), -d), 0.0f);
-        const float spec = m.specular.w > 0.0f ? pow(rv, m.specular.w) : 1.0f;
-        const float3 brdf = s.kd * ndl + m.specular.xyz * spec;
-        /* light that adds less than min_weight to the pixel (the cut-off of children) is added
-         * unshadowed, with no shadow ray: e.g. the water's sharp highlight away from the sun's
-         * mirror direction, a third of the pool's shadow rays. Unoccluded, the same sum. */
-        if (max3(w * E * brdf) < prm->min_weight) {
-            sum += E * brdf;
-            continue;
-        }
-        const float3 T = shadow_transmittance(SCENE_ARGS, RENDER_GEOM_ARGS, prm, org, ldir, dist,
-                                              r.medium);
-        if (max3(T) <= 0.0f) continue;
-        sum += T * E * brdf;
-    }
-    radiance[i] += (float4)(w * sum, 0.0f);
 }
 
 __kernel void render_shadow(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,

@@ -3,17 +3,7 @@
  * one launch fewer per depth level, the ray and hit stay in registers). */
 #include "common.h"
 #include "render_surface.h"
-#include "traverse.h"
-
-inline Hit trace_ray(SCENE_PARAMS, const Ray* r, uint depth)
-{
-    Hit h = {INFINITY, 0.0f, 0.0f, -1, -1};
-    if (r->wr + r->wg + r->wb > 0.0f)   /* dead padding rays have zero weight */
-        h = scene_closest_hit_masked(SCENE_ARGS, (float3)(r->ox, r->oy, r->oz),
-                                     (float3)(r->dx, r->dy, r->dz), 0.0f, INFINITY, ~0u,
-                                     depth ? TRACE_KIND_SECONDARY : TRACE_KIND_PRIMARY);
-    return h;
-}
+#include "render_trace.h"
 
 /* Grid-stride loops: launched with any number of work-items, the device-side count decides. */
 __kernel void render_trace(SCENE_PARAMS, __global const Ray* restrict rays,

@@ -134,9 +134,10 @@ typedef struct {
     uint pad;
 } RaygenParams;
 
-/* 16 bytes. render_gather's per-launch values: what this level of this chunk does. */
+/* 20 bytes. render_gather's per-launch values: what this level of this chunk does. */
 typedef struct {
     uint scatter;       /* 1: scatter the rays' children into the next wavefront */
+    uint accumulate;    /* 1: add each pixel's run of rays' radiance into the framebuffer */
     uint q0;            /* first tile-order pixel of the chunk */
     uint n_q;           /* pixels of the chunk */
     uint finish;        /* 1: the tonemap pass after the chunk's last level (no rays) */

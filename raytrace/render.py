@@ -14,13 +14,33 @@ the ray buffers would not fit in device memory):
       render.gather    children scattered into the next wavefront; each pixel gathers its rays'
                        radiance (rays stay sorted by pixel); after the last level, tonemap + sRGB
 
+That is the order with ``overlap_levels`` off. On (the default), level d's shadow rays and level
+d + 1's trace, independent once level d's children are scattered, share one launch
+(render.shadow_trace, named after level d + 1), so the tail levels' few shadow rays cost no
+traversal latency of their own (NVIDIA runs no two kernels of one queue at once):
+
+    render.trace, render.shade                                    level 0
+    per depth d < deepest:
+      render.secondary, render.gather (scatter only)              children of level d
+      render.shadow_trace  level d's shadow rays + level d+1's trace (and shade, fused)
+      render.gather (accumulate only)                             level d into the framebuffer
+      render.shade                                                level d+1 (unless fused)
+    render.shadow, render.gather, tonemap                         the deepest level
+
+``overlap_from`` D keeps the levels before D in the first order (their shadow rays alone), e.g.
+to overlap only the tail levels of few rays. The levels' hits live in two buffers by parity
+(level d's shadow rays read theirs while d + 1 traces), and with ``fuse_trace_shade`` the
+radiance too; unfused, level d + 1's shade runs after level d's accumulation on the in-order
+queue and one radiance buffer serves.
+
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
-the shading). Every kernel (``kernels.launch.Kernel``) belongs to this renderer (one per depth
-level; the tonemap pass has its own gather object) and its arguments are bound by name when the
-scene's buffers change; per-launch values are the by-value RaygenParams/GatherParams records.
+the shading), either order. Every kernel (``kernels.launch.Kernel``) belongs to this renderer
+(one per depth level; the tonemap pass and the scatter alone have their own gather objects) and
+its arguments are bound by name when the scene's buffers change; per-launch values are the
+by-value RaygenParams/GatherParams records.
 The frame's launches are a plan (kernel, sizes, stage; binds between them where several chunks
-need them) made once per launch sizes, depth, lights and bindings, and replayed each frame as
-bare enqueues. Per-ray kernels loop with a grid stride over the device-side count and are
+need them) made once per launch sizes, depth, lights, order and bindings, and replayed each frame
+as bare enqueues. Per-ray kernels loop with a grid stride over the device-side count and are
 launched for about the last arrived count (``size_hints``) rather than every slot: any size
 gives the same image.
 
@@ -89,11 +109,15 @@ class RenderSettings:
                                   #: (any size is correct: the image never depends on it)
     local_size: int = 64          #: work-group size of the per-ray and per-pixel stages
     fuse_trace_shade: bool = False  #: one kernel traces and shades (render.trace includes shade)
+    overlap_levels: bool = True   #: shadow rays of level d and trace of d + 1 in one launch
+                                  #: (render.shadow_trace; the same image, one hit buffer more)
+    overlap_from: int = 0         #: with overlap_levels, the first level d whose shadow rays
+                                  #: go with level d + 1's trace (the levels before: alone)
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
         for name, lo, hi in (("width", 1, 16384), ("height", 1, 16384), ("spp", 1, 4096),
-                             ("bounces", 0, MAX_DEPTH)):
+                             ("bounces", 0, MAX_DEPTH), ("overlap_from", 0, MAX_DEPTH)):
             v = getattr(self, name)
             if not isinstance(v, int | np.integer) or not lo <= v <= hi:
                 raise ValueError(f"render {name} must be an integer in [{lo}, {hi}], got {v!r}")
@@ -116,6 +140,13 @@ class RenderSettings:
         FresnelMode.from_str(self.fresnel)
         Tonemap.from_str(self.tonemap)
         return dataclasses.replace(self, pattern=str(p))
+
+
+def bytes_per_ray_slot(settings: RenderSettings) -> int:
+    """:data:`BYTES_PER_RAY_SLOT` plus, with ``overlap_levels``, a second hit record (two levels'
+    hits live at once) and, with ``fuse_trace_shade`` too, a second radiance."""
+    s = settings
+    return BYTES_PER_RAY_SLOT + s.overlap_levels * (HIT_DTYPE.itemsize + 16 * s.fuse_trace_shade)
 
 
 def jitter_cols(spp: int) -> int:
@@ -166,7 +197,7 @@ class Renderer:
         # chunk of pixels whose ray buffers fit in the memory budget
         budget = s.memory_fraction * rt.device.global_mem_size
         max_alloc = rt.device.max_mem_alloc_size
-        slot_limit = min(budget / BYTES_PER_RAY_SLOT, max_alloc / RAY.itemsize)
+        slot_limit = min(budget / bytes_per_ray_slot(s), max_alloc / RAY.itemsize)
         chunk_q = int(slot_limit / (s.capacity_factor * s.spp))
         if s.max_chunk_rays is not None:
             chunk_q = min(chunk_q, max(1, s.max_chunk_rays // s.spp))
@@ -179,11 +210,13 @@ class Renderer:
         self.capacity = max(self.n_primary_max,
                             int(math.ceil(s.capacity_factor * self.n_primary_max)))
         cap = self.capacity
-        check_fits(rt, cap * BYTES_PER_RAY_SLOT + self.n_pixels * (20 + s.aov * AOV.itemsize),
-                   f"render {s.width}x{s.height}", largest=16 * self.n_pixels)  # kernels.limits
+        self._check_fits(s)  # kernels.limits
         self.rays = [rt.buffer(cap * RAY.itemsize), rt.buffer(cap * RAY.itemsize)]
-        self.hits = rt.buffer(cap * HIT_DTYPE.itemsize)
-        self.radiance = rt.buffer(cap * 16)
+        # the hits and radiance of the levels of each parity (one buffer for both unless two
+        # levels' are live at once: _level_buffers)
+        self.hits = [rt.buffer(cap * HIT_DTYPE.itemsize)] * 2
+        self.radiance = [rt.buffer(cap * 16)] * 2
+        self._level_buffers()
         self.child = rt.buffer(cap * 4)
         self.block_sums = rt.buffer(4 * -(-cap // SCAN_BLOCK))
         self.counts = rt.buffer(4 * (MAX_DEPTH + 2))
@@ -234,11 +267,11 @@ class Renderer:
                 depths.append((rnd(launch_n), (blocks * SCAN_WG,), rnd(nq)))
                 launch_n = min(self.capacity, 2 * launch_n)
             raygen = np.array([(q0, n_rays, int(q0 == 0), 0)], RAYGEN_PARAMS)[0]
-            # the GatherParams of a level that scatters, of the last level (accumulate only)
-            # and of the tonemap pass after it
-            gather = (np.array([(1, q0, nq, 0)], GATHER_PARAMS)[0],
-                      np.array([(0, q0, nq, 0)], GATHER_PARAMS)[0],
-                      np.array([(0, q0, nq, 1)], GATHER_PARAMS)[0])
+            # the GatherParams (scatter, accumulate, q0, n_q, finish) of a level that scatters
+            # and accumulates, of an accumulation alone (the last level; overlap_levels: every
+            # level, after its shadow rays), of the tonemap pass, and of a scatter alone
+            gather = tuple(np.array([(sc, acc, q0, nq, fin)], GATHER_PARAMS)[0]
+                           for sc, acc, fin in ((1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 0)))
             self._plan.append((raygen, gather, (max(n_rays, STATS_LEN),), depths))
 
     def _launch_sizes(self, depths: list, hint: tuple | None) -> tuple:
@@ -263,6 +296,43 @@ class Renderer:
             sizes = self._sizes[key] = tuple(sizes)
         return sizes
 
+    def _check_fits(self, s: RenderSettings) -> None:
+        """One-line DeviceLimitError when the ray slots and per-pixel buffers do not fit."""
+        check_fits(self.rt, self.capacity * bytes_per_ray_slot(s)
+                   + self.n_pixels * (20 + s.aov * AOV.itemsize),
+                   f"render {s.width}x{s.height}", largest=16 * self.n_pixels)
+
+    def _level_buffers(self) -> None:
+        """With ``overlap_levels``, the odd levels' hits (and, fused, radiance) in buffers of
+        their own: render.shadow_trace traces (and shades) level d + 1 while level d's shadow
+        rays read its hits and add to its radiance, and the accumulation of level d reads that
+        radiance after it. Unfused, render.shade of level d + 1 runs after that accumulation on
+        the in-order queue, so one radiance buffer serves both parities."""
+        s = self.settings
+        if not s.overlap_levels:
+            return
+        cap = self.capacity
+        if self.hits[1] is self.hits[0]:
+            self.hits = [self.hits[0], self.rt.buffer(cap * HIT_DTYPE.itemsize)]
+        if s.fuse_trace_shade and self.radiance[1] is self.radiance[0]:
+            self.radiance = [self.radiance[0], self.rt.buffer(cap * 16)]
+
+    def set_overlap(self, on: bool = True, first: int | None = None) -> None:
+        """Turn ``overlap_levels`` on or off for the next frames, overlapping from level
+        ``first`` (None: keep ``overlap_from``); an A/B switch (bench frame --no-overlap,
+        --overlap-from). On after a renderer made without it allocates the second hit buffer
+        (and radiance, fused) then; the image is the same either way."""
+        first = self.settings.overlap_from if first is None else first
+        new = dataclasses.replace(self.settings, overlap_levels=bool(on), overlap_from=first)
+        new = new.resolved()   # one-line ValueError for a bad level
+        if new == self.settings:
+            return
+        if new.overlap_levels and not self.settings.overlap_levels:
+            self._check_fits(new)
+        self.settings = new
+        self._level_buffers()
+        self._bound_sig = None  # rebind: the kernels of the new order, to these buffers
+
     def set_stage_per_depth(self, on: bool = True) -> None:
         """Time each depth level's trace, shade, shadow, scan and gather under its own stage
         (``render.shadow.d3``), e.g. to see the tail levels of few rays (bench frame
@@ -284,7 +354,7 @@ class Renderer:
             def launcher(source, name, stage, d=d):
                 return rt.kernel_launcher(source, name, stage=self._stage_name(stage, d))
 
-            self._k.append({
+            ks = {
                 "trace": launcher("render_trace.cl", "render_trace", trace),
                 "trace_shade": launcher("render_trace.cl", "render_trace_shade", trace),
                 "shade": launcher("render_shade.cl", "render_shade", "render.shade"),
@@ -293,8 +363,21 @@ class Renderer:
                 "gather": launcher("render_frame.cl", "render_gather", "render.gather"),
                 # the same kernel for the tonemap pass after the last level: its own object,
                 # so neither changes arguments between frames
-                "finish": launcher("render_frame.cl", "render_gather", "render.gather")})
+                "finish": launcher("render_frame.cl", "render_gather", "render.gather"),
+                # the scatter half of gather when the accumulation runs apart (overlap_levels)
+                "scatter": launcher("render_frame.cl", "render_gather", "render.gather")}
+            self._k.append(ks)
             self._bound_sig = None
+        if self.settings.overlap_levels:   # level d's shadow rays with level d + 1's trace
+            for d, ks in enumerate(self._k[1:], 1):
+                if "shadow_trace" not in ks:
+                    ks["shadow_trace"] = rt.kernel_launcher(
+                        "render_shadow_trace.cl", "render_shadow_trace",
+                        stage=self._stage_name("render.shadow_trace", d))
+                    ks["shadow_trace_shade"] = rt.kernel_launcher(
+                        "render_shadow_trace.cl", "render_shadow_trace_shade",
+                        stage=self._stage_name("render.shadow_trace", d))
+                    self._bound_sig = None
         return self._k[depth]
 
     def _bind(self, levels: int) -> None:
@@ -318,22 +401,30 @@ class Renderer:
         shading = {**geom, "prm": self.params_buf}
         for d, k in enumerate(self._k):
             wave = {"rays": self.rays[d % 2], "counts": self.counts, "depth": d}
-            k["trace"].bind(**scene, **wave, hits=self.hits)
-            out = {"radiance": self.radiance, "child_counts": self.child, "aov": self.aov,
+            hits, radiance = self.hits[d % 2], self.radiance[d % 2]
+            k["trace"].bind(**scene, **wave, hits=hits)
+            out = {"radiance": radiance, "child_counts": self.child, "aov": self.aov,
                    "write_aov": int(s.aov)}
-            k["shade"].bind(**shading, cam=self.camera_buf, **wave, hits=self.hits, **out)
+            k["shade"].bind(**shading, cam=self.camera_buf, **wave, hits=hits, **out)
             k["trace_shade"].bind(**scene, **shading, cam=self.camera_buf, **wave,
-                                  hits=self.hits, **out)
-            k["shadow"].bind(**scene, **shading, lights=self.scene.light_buf, **wave,
-                             hits=self.hits, radiance=self.radiance,
-                             caustic_map=self.caustic_map, cprm=self.caustic_params)
+                                  hits=hits, **out)
+            light = {"lights": self.scene.light_buf, "caustic_map": self.caustic_map,
+                     "cprm": self.caustic_params}
+            k["shadow"].bind(**scene, **shading, **light, **wave, hits=hits, radiance=radiance)
+            if "shadow_trace" in k:   # level d - 1's shadow rays, level d's trace (and shade)
+                last = {"shadow_rays": self.rays[(d - 1) % 2],
+                        "shadow_hits": self.hits[(d - 1) % 2],
+                        "shadow_radiance": self.radiance[(d - 1) % 2]}
+                k["shadow_trace"].bind(**scene, **shading, **light, **last, **wave, hits=hits)
+                k["shadow_trace_shade"].bind(**scene, **shading, **light, **last,
+                                             cam=self.camera_buf, **wave, hits=hits, **out)
             k["scan"].bind(child_counts=self.child, counts=self.counts, depth=d,
                            capacity=self.capacity, block_sums=self.block_sums,
                            ticket=self.ticket, stats=self.stats)
-            for g in (k["gather"], k["finish"]):
-                g.bind(**shading, cam=self.camera_buf, **wave, hits=self.hits,
+            for g in (k["gather"], k["finish"], k["scatter"]):
+                g.bind(**shading, cam=self.camera_buf, **wave, hits=hits,
                        child_offsets=self.child, block_sums=self.block_sums,
-                       out=self.rays[(d + 1) % 2], radiance=self.radiance,
+                       out=self.rays[(d + 1) % 2], radiance=radiance,
                        fb=self.framebuffer, rgba=self.rgba)
         self._bound_sig = bufs
         self._bind_version += 1
@@ -414,7 +505,7 @@ class Renderer:
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
         sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
-               self._bind_version)
+               s.overlap_levels, s.overlap_from, self._bind_version)
         ops = self._plans.get(key)
         if ops is None:
             if len(self._plans) >= 16:
@@ -447,29 +538,52 @@ class Renderer:
             k.bind(**values)
             ops.append((self._BIND, k, values))
 
-        for (rp, (gather_scatter, gather_last, gather_finish), raygen_size, _), sz in zip(
+        trace = "trace_shade" if s.fuse_trace_shade else "trace"
+
+        def overlapped(d: int) -> bool:   # level d's shadow rays go with level d + 1's trace
+            return s.overlap_levels and s.overlap_from <= d < deepest
+
+        for (rp, (g_both, g_accumulate, g_finish, g_scatter), raygen_size, _), sz in zip(
                 self._plan, sizes, strict=True):
             bind(self.k_raygen, rp=rp)
             launch(self.k_raygen, raygen_size, None)
             for depth in range(deepest + 1):
                 k = ks[depth]
                 ray_size, scan_size, scatter_size, pixel_size = sz[depth]
-                launch(k["trace_shade" if s.fuse_trace_shade else "trace"], ray_size, ls)
-                if depth == 0 and rp["zero_stats"]:
-                    ops.append((self._FLUSH,))  # the device starts while the rest is enqueued
-                if not s.fuse_trace_shade:
-                    launch(k["shade"], ray_size, ls)
+                if depth == 0 or not overlapped(depth - 1):  # else traced with the last
+                    launch(k[trace], ray_size, ls)
+                    if depth == 0 and rp["zero_stats"]:
+                        ops.append((self._FLUSH,))  # the device starts while the rest is queued
+                    if not s.fuse_trace_shade:
+                        launch(k["shade"], ray_size, ls)
+                if not overlapped(depth):
+                    if has_lights:
+                        launch(k["shadow"], ray_size, ls)
+                    if depth < deepest:
+                        launch(k["scan"], scan_size, scan_ls)
+                        bind(k["gather"], gp=g_both)
+                        launch(k["gather"], scatter_size, ls)
+                    else:
+                        bind(k["gather"], gp=g_accumulate)
+                        launch(k["gather"], scatter_size, ls)
+                        bind(k["finish"], gp=g_finish)
+                        launch(k["finish"], pixel_size, ls)
+                    continue
+                # overlap_levels: scatter the children, then this level's shadow rays with the
+                # next level's trace in one launch, then accumulate this level, shade the next
+                nxt = ks[depth + 1]
+                next_size = sz[depth + 1][0]
+                launch(k["scan"], scan_size, scan_ls)
+                bind(k["scatter"], gp=g_scatter)
+                launch(k["scatter"], scatter_size, ls)
                 if has_lights:
-                    launch(k["shadow"], ray_size, ls)
-                if depth < deepest:
-                    launch(k["scan"], scan_size, scan_ls)
-                    bind(k["gather"], gp=gather_scatter)
-                    launch(k["gather"], scatter_size, ls)
+                    launch(nxt["shadow_" + trace], (ray_size[0] + next_size[0],), ls)
                 else:
-                    bind(k["gather"], gp=gather_last)
-                    launch(k["gather"], scatter_size, ls)
-                    bind(k["finish"], gp=gather_finish)
-                    launch(k["finish"], pixel_size, ls)
+                    launch(nxt[trace], next_size, ls)
+                bind(k["gather"], gp=g_accumulate)
+                launch(k["gather"], scatter_size, ls)
+                if not s.fuse_trace_shade:
+                    launch(nxt["shade"], next_size, ls)
         return ops
 
     def _run(self, ops: list, rebind: bool) -> None:
@@ -495,7 +609,9 @@ class Renderer:
                 old[2] == self._bind_version:
             return
         for k in self._k:
-            k["shadow"].bind(caustic_map=cmap, cprm=self.caustic_params)
+            for name in ("shadow", "shadow_trace", "shadow_trace_shade"):
+                if name in k:
+                    k[name].bind(caustic_map=cmap, cprm=self.caustic_params)
         self._caustic_bound = (cmap, cprm, self._bind_version)
 
     def _count_hint(self) -> tuple | None:
@@ -588,7 +704,8 @@ class Renderer:
 
     def memory_report(self) -> dict:
         """Device bytes per ray slot and per primary ray, and per triangle of the scene."""
-        return {"bytes_per_ray_slot": BYTES_PER_RAY_SLOT,
-                "bytes_per_primary_ray": BYTES_PER_RAY_SLOT * self.capacity / self.n_primary_max,
+        per_slot = bytes_per_ray_slot(self.settings)
+        return {"bytes_per_ray_slot": per_slot,
+                "bytes_per_primary_ray": per_slot * self.capacity / self.n_primary_max,
                 "ray_slots": self.capacity, "chunks": len(self.chunks),
                 "bytes_per_triangle": self.scene.bytes_per_triangle()}

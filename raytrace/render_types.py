@@ -105,11 +105,11 @@ RENDERPARAMS = np.dtype([("ambient", f4), ("sky_zenith", f4), ("sky_horizon", f4
 AOV = np.dtype([("normal", f4), ("depth", np.float32), ("prim", np.int32), ("inst", np.int32),
                 ("material", np.int32)])
 
-#: render_raygen's and render_gather's per-launch values (by value, 16 bytes each).
+#: render_raygen's and render_gather's per-launch values (by value, 16 and 20 bytes).
 RAYGEN_PARAMS = np.dtype([("q0", np.uint32), ("n_rays", np.uint32), ("zero_stats", np.uint32),
                           ("pad", np.uint32)])
-GATHER_PARAMS = np.dtype([("scatter", np.uint32), ("q0", np.uint32), ("n_q", np.uint32),
-                          ("finish", np.uint32)])
+GATHER_PARAMS = np.dtype([("scatter", np.uint32), ("accumulate", np.uint32), ("q0", np.uint32),
+                          ("n_q", np.uint32), ("finish", np.uint32)])
 
 #: Instance visibility bits (kernels/render_types.h): all opaque, or holding a dielectric.
 MASK_OPAQUE = 1

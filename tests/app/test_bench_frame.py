@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from app.cli import main
 
 
@@ -44,14 +46,30 @@ def test_bench_frame_photons_sets_the_caustic_photons_and_times_them(tmp_path, c
     assert "--photons 0 is out of range" in capsys.readouterr().err
 
 
-def test_bench_frame_per_depth_stages(tmp_path):
+@pytest.mark.parametrize("flags", [[], ["--no-overlap"], ["--overlap-from", "1"]])
+def test_bench_frame_per_depth_stages(tmp_path, flags):
     out = tmp_path / "res"
     assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
                  "--warmup", "1", "--frame-time", "0.1", "--caustics", "off", "--per-depth",
-                 "--out", str(out)]) == 0
+                 *flags, "--out", str(out)]) == 0
     r = json.loads((out / "bench_frame.json").read_text())[0]
     depths = [int(n) for n in r["rays_per_depth"].split()]
     assert depths[0] == 48 * 32 and len(depths) == 6  # the pool's 5 bounces
-    assert r["render.trace.d0_ms"] > 0 and r["render.shadow.d0_ms"] > 0
-    assert r["render.trace_secondary.d1_ms"] > 0 and r["render.shadow.d5_ms"] >= 0
+    overlap, first = "--no-overlap" not in flags, 1 if "--overlap-from" in flags else 0
+    assert r["overlap"] is overlap and r["overlap_from"] == first and r["render.trace.d0_ms"] > 0
+    assert r["render.shadow.d5_ms"] >= 0   # the last level's shadow rays run alone either way
+    # level d's shadow rays with level d + 1's trace, from level `first` on
+    combined = {f"render.shadow_trace.d{d}_ms" for d in range(first + 1, 6)} if overlap else set()
+    assert {k for k in r if k.startswith("render.shadow_trace")} == combined
+    assert ("render.shadow.d0_ms" in r) == (not overlap or first > 0)
+    assert ("render.trace_secondary.d1_ms" in r) == (not overlap or first > 0)
+    assert ("render.trace_secondary.d2_ms" in r) == (not overlap)
     assert "render.shadow_ms" not in r and "render.trace_ms" not in r
+
+
+def test_bench_frame_overlap_from_out_of_range_is_one_line(tmp_path, capsys):
+    assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
+                 "--overlap-from", "99", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--overlap-from 99 is out of range; allowed [0, 32]" in err
+    assert "\n" not in err

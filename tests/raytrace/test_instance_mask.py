@@ -1,6 +1,6 @@
 """Instance visibility masks (kernels/bvh.h Instance.mask): a masked query sees only instances
 sharing a bit with its mask; RenderScene marks instances opaque or transmissive for the shadow
-rays (render_shade.cl)."""
+rays (render_shadow.h)."""
 
 import numpy as np
 import pytest

@@ -1,0 +1,71 @@
+/* Renderer stage: the shadow rays of depth level depth - 1 and the closest hits of level depth in
+ * one launch (RenderSettings.overlap_levels). The two are independent once the children of
+ * level depth - 1 are scattered, and NVIDIA's OpenCL runs no two kernels of one in-order queue at
+ * once: in one launch, the tail levels' few shadow rays no longer cost a traversal chain of
+ * latency of their own. Work-item j of a grid-stride loop over counts[depth - 1] +
+ * counts[depth] does shadow ray j of level depth - 1 (j < counts[depth - 1]), else traces ray
+ * j - counts[depth - 1] of level depth: the same per-ray bodies as render_shadow
+ * (render_shadow.h) and render_trace / render_trace_shade (render_trace.h, shade_hit), so the
+ * image is the same byte for byte. The levels' hits (and, shaded here, their radiance) live in
+ * buffers of their own parity. */
+#include "common.h"
+#include "render_shadow.h"
+#include "render_surface.h"
+#include "render_trace.h"
+
+__kernel void render_shadow_trace(SCENE_PARAMS, RENDER_GEOM_PARAMS,
+                                  __constant const RenderParams* prm,
+                                  __global const Light* restrict lights,
+                                  __global const uint* restrict counts, const uint depth,
+                                  __global const Ray* restrict shadow_rays,
+                                  __global const Hit* restrict shadow_hits,
+                                  __global float4* restrict shadow_radiance,
+                                  __global const float4* restrict caustic_map,
+                                  const CausticParams cprm, __global const Ray* restrict rays,
+                                  __global Hit* restrict hits)
+{
+    const uint n_shadow = counts[depth - 1u], n = n_shadow + counts[depth];
+    for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
+        if (j < n_shadow) {
+            shadow_ray(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits, j,
+                       shadow_radiance, caustic_map, &cprm);
+        } else {
+            const uint i = j - n_shadow;
+            const Ray r = rays[i];
+            hits[i] = trace_ray(SCENE_ARGS, &r, depth);
+        }
+    }
+}
+
+/* The same with level depth's hits shaded at once (RenderSettings.fuse_trace_shade). */
+__kernel void render_shadow_trace_shade(SCENE_PARAMS, RENDER_GEOM_PARAMS,
+                                        __constant const RenderParams* prm,
+                                        __global const Light* restrict lights,
+                                        __global const uint* restrict counts, const uint depth,
+                                        __global const Ray* restrict shadow_rays,
+                                        __global const Hit* restrict shadow_hits,
+                                        __global float4* restrict shadow_radiance,
+                                        __global const float4* restrict caustic_map,
+                                        const CausticParams cprm,
+                                        __constant const Camera* cam,
+                                        __global const Ray* restrict rays,
+                                        __global Hit* restrict hits,
+                                        __global float4* restrict radiance,
+                                        __global uint* restrict child_counts,
+                                        __global Aov* restrict aov, const uint write_aov)
+{
+    const uint n_shadow = counts[depth - 1u], n = n_shadow + counts[depth];
+    for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
+        if (j < n_shadow) {
+            shadow_ray(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits, j,
+                       shadow_radiance, caustic_map, &cprm);
+        } else {
+            const uint i = j - n_shadow;
+            const Ray r = rays[i];
+            const Hit h = trace_ray(SCENE_ARGS, &r, depth);
+            hits[i] = h;
+            shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
+                      write_aov);
+        }
+    }
+}
