@@ -47,8 +47,9 @@ def add_arguments(p) -> None:
     p.add_argument("--no-overlap", action="store_true",
                    help="launch each depth level's shadow rays alone, not with the next level's "
                         "trace (RenderSettings.overlap_levels off: an A/B of the same image)")
-    p.add_argument("--overlap-from", type=int, default=0, metavar="D",
-                   help="overlap only the levels from depth D on (RenderSettings.overlap_from)")
+    p.add_argument("--overlap-from", type=int, default=None, metavar="D",
+                   help="overlap only the levels from depth D on (default: "
+                        "RenderSettings.overlap_from, 1)")
     p.add_argument("--host-copy", action="store_true",
                    help="copy each image out of the pinned read-back array and check its pixels "
                         "inside the timed loop (the cost a read_frame() caller adds)")
@@ -105,8 +106,8 @@ def run(args) -> int:
         if not 1 <= args.photons <= 2**26:
             raise InputError(f"--photons {args.photons} is out of range; allowed [1, {2**26}]")
         scene = with_shading(scene, {"caustic_photons": args.photons})
-    overlap_from = getattr(args, "overlap_from", 0)
-    if not 0 <= overlap_from <= MAX_DEPTH:
+    overlap_from = getattr(args, "overlap_from", None)
+    if overlap_from is not None and not 0 <= overlap_from <= MAX_DEPTH:
         raise InputError(f"--overlap-from {overlap_from} is out of range; allowed [0, {MAX_DEPTH}]")
     rt = get_runtime(args.device)
     rows = []

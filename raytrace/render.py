@@ -111,8 +111,10 @@ class RenderSettings:
     fuse_trace_shade: bool = False  #: one kernel traces and shades (render.trace includes shade)
     overlap_levels: bool = True   #: shadow rays of level d and trace of d + 1 in one launch
                                   #: (render.shadow_trace; the same image, one hit buffer more)
-    overlap_from: int = 0         #: with overlap_levels, the first level d whose shadow rays
-                                  #: go with level d + 1's trace (the levels before: alone)
+    overlap_from: int = 1         #: with overlap_levels, the first level d whose shadow rays
+                                  #: go with level d + 1's trace (the levels before: alone;
+                                  #: level 0's 2M shadow rays with level 1's trace were slower
+                                  #: on the H200 than apart: BENCHMARKS.md)
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""

@@ -5,6 +5,7 @@ import json
 import pytest
 
 from app.cli import main
+from raytrace.render import RenderSettings
 
 
 def test_bench_frame_writes_stages_and_fps(tmp_path, capsys):
@@ -46,7 +47,8 @@ def test_bench_frame_photons_sets_the_caustic_photons_and_times_them(tmp_path, c
     assert "--photons 0 is out of range" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("flags", [[], ["--no-overlap"], ["--overlap-from", "1"]])
+@pytest.mark.parametrize("flags", [[], ["--no-overlap"], ["--overlap-from", "0"],
+                                   ["--overlap-from", "2"]])
 def test_bench_frame_per_depth_stages(tmp_path, flags):
     out = tmp_path / "res"
     assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
@@ -55,7 +57,8 @@ def test_bench_frame_per_depth_stages(tmp_path, flags):
     r = json.loads((out / "bench_frame.json").read_text())[0]
     depths = [int(n) for n in r["rays_per_depth"].split()]
     assert depths[0] == 48 * 32 and len(depths) == 6  # the pool's 5 bounces
-    overlap, first = "--no-overlap" not in flags, 1 if "--overlap-from" in flags else 0
+    overlap = "--no-overlap" not in flags
+    first = int(flags[1]) if "--overlap-from" in flags else RenderSettings.overlap_from
     assert r["overlap"] is overlap and r["overlap_from"] == first and r["render.trace.d0_ms"] > 0
     assert r["render.shadow.d5_ms"] >= 0   # the last level's shadow rays run alone either way
     # level d's shadow rays with level d + 1's trace, from level `first` on
@@ -63,7 +66,7 @@ def test_bench_frame_per_depth_stages(tmp_path, flags):
     assert {k for k in r if k.startswith("render.shadow_trace")} == combined
     assert ("render.shadow.d0_ms" in r) == (not overlap or first > 0)
     assert ("render.trace_secondary.d1_ms" in r) == (not overlap or first > 0)
-    assert ("render.trace_secondary.d2_ms" in r) == (not overlap)
+    assert ("render.trace_secondary.d2_ms" in r) == (not overlap or first > 1)
     assert "render.shadow_ms" not in r and "render.trace_ms" not in r
 
 

@@ -38,7 +38,7 @@ def stages(r):
                                                 (False, False, 128), (True, False, None)])
 def test_overlap_gives_the_bytes_of_the_level_by_level_order(rt, fused, lights, chunk):
     s = RenderSettings(width=20, height=14, bounces=3, spp=4, fuse_trace_shade=fused,
-                       max_chunk_rays=chunk)
+                       max_chunk_rays=chunk, overlap_from=0)
     scene = build(rt, 3) if lights else glass_without_lights(rt)
     r_on, *on = frame(rt, scene, s)
     r_off, *off = frame(rt, scene, dataclasses.replace(s, overlap_levels=False))
