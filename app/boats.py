@@ -85,12 +85,13 @@ def boat_bodies(scene) -> list[BoatBody]:
     return out
 
 
-def make_boats(scene, sim, bodies: list[BoatBody], transform_buffer, rows):
-    """:class:`lbm.bodies.Boats` for ``bodies`` on ``sim``; bad boats as one-line InputErrors."""
+def make_boats(scene, sim, bodies: list[BoatBody], transform_buffer, rows, **options):
+    """:class:`lbm.bodies.Boats` for ``bodies`` on ``sim`` (``options``: Boats' keywords);
+    bad boats as one-line InputErrors."""
     from lbm.bodies import Boats
 
     try:
         return Boats(sim, [b.spec for b in bodies], transform_buffer, rows,
-                     origin=scene.water.origin)
+                     origin=scene.water.origin, **options)
     except ValueError as exc:   # HullError is a ValueError: too heavy, too deep, bad values
         raise InputError(f"{scene.path}: {exc}") from None

@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT))
 
 
 def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
-            every_step: bool, groups: int = 0) -> dict:
+            every_step: bool, groups: int = 0, work_group: int = 512) -> dict:
     import lbm
     from app.assemble import water_spec
     from app.bench_frame import with_boats
@@ -34,7 +34,8 @@ def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
     water = water_spec(sc, cells)
     sim = lbm.from_water_spec(water, device=rt)
     bodies = boat_bodies(sc)
-    boats = make_boats(sc, sim, bodies, rt.buffer(48 * len(bodies)), list(range(len(bodies))))
+    boats = make_boats(sc, sim, bodies, rt.buffer(48 * len(bodies)), list(range(len(bodies))),
+                       work_group=work_group)
     if every_step:
         boats.max_substep = sim.dt * (1 + 1e-6)
     if groups > 0:
@@ -56,6 +57,7 @@ def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
             "cadence": "every step" if every_step else f"every {boats.every} steps",
             "water_steps_per_frame": per_frame, "updates_per_frame": round(updates, 2),
             "launches_per_frame": round(updates, 2), "groups_per_boat": groups,
+            "work_group": work_group,
             "bodies_ms": round(bodies_ms, 4),
             "ms_per_launch": round(bodies_ms / updates, 4),
             "lbm_step_ms": round(statistics.median(r.get("lbm.step", 0.0) for r in rows), 4)}
@@ -70,6 +72,8 @@ def main(argv=None) -> int:
     p.add_argument("--warmup", type=int, default=10)
     p.add_argument("--groups", type=int, nargs="+", default=[0],
                    help="work-groups per boat (0: the default choice)")
+    p.add_argument("--work-group", type=int, nargs="+", default=[512],
+                   help="work-items per work-group of the update (128, 256, 512, 1024)")
     p.add_argument("--every-step", action="store_true",
                    help="also time an update after every water step (the old cadence)")
     p.add_argument("--device", default=None)
@@ -83,11 +87,12 @@ def main(argv=None) -> int:
     out = []
     for n in args.boats:
         for every_step in ((False, True) if args.every_step else (False,)):
-            for g in args.groups:
-                row = measure(rt, scene, args.cells, n, args.frames, args.warmup, every_step, g)
+            for g, wg in ((g, wg) for g in args.groups for wg in args.work_group):
+                row = measure(rt, scene, args.cells, n, args.frames, args.warmup, every_step, g,
+                              wg)
                 out.append(row)
                 print(f"{row['cells']} {n:2d} boats, {row['cadence']}, {row['groups_per_boat']}"
-                      f" groups/boat: bodies {row['bodies_ms']:.4f} ms/frame "
+                      f" groups/boat of {wg}: bodies {row['bodies_ms']:.4f} ms/frame "
                       f"({row['ms_per_launch']:.4f} per launch), "
                       f"{row['launches_per_frame']} launches/frame, lbm.step "
                       f"{row['lbm_step_ms']:.3f} ms", flush=True)

@@ -13,7 +13,9 @@
 
 /* Work-group size of lbm_bodies_update (a power of two): G work-groups per body slot (the
  * launch's size says G), each the body's whole update and a tile of its pressure pass. */
+#ifndef LBM_BODY_WG   /* lbm/bodies.py Boats(work_group=...) may set it */
 #define LBM_BODY_WG 512
+#endif
 /* Partial sums per accumulator in the update's reduction (LBM_BODY_WG / 32 terms each). */
 #define LBM_BODY_PARTS 16
 /* Most bodies (lbm/bodies.py MAX_BOATS): the kernels stage them all in local memory. */

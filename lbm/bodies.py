@@ -325,7 +325,7 @@ class Boats:
 
     def __init__(self, sim, specs, transform_buffer: cl.Buffer, rows, *,
                  origin=(0.0, 0.0, 0.0), rho: float = RHO_WATER, max_substep: float = 1 / 120,
-                 coupled: bool = True):
+                 coupled: bool = True, work_group: int = BODY_WG):
         self.sim, self.rt = sim, sim.rt
         self.origin = _finite3("origin", origin)
         self.rho = float(rho)
@@ -346,7 +346,11 @@ class Boats:
         self.names: list[str] = []
         self._slots: list[int] = []
         self._foot = None
-        defines = sim.defines
+        if work_group not in (128, 256, 512, 1024):
+            raise ValueError(f"work_group={work_group}; allowed 128, 256, 512, 1024")
+        self.work_group = int(work_group)   #: LBM_BODY_WG of the update kernel
+        defines = sim.defines if work_group == BODY_WG else {**sim.defines,
+                                                              "LBM_BODY_WG": work_group}
         self._k_update = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_update",
                                                  stage="lbm.bodies", defines=defines)
         self._k_press_all = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_press_all",
@@ -562,7 +566,8 @@ class Boats:
             r = max((float(self._host[k]["damping"][3]) for k in self._slots), default=0.0)
             side = math.floor(2.0 * (r + reach) / self.sim.dx) + 8
             area = min(side, self.sim.nx) * min(side, self.sim.ny)
-            cells = BODY_WG * max(float(self.press_cells), 1.0 / BODY_WG)
+            wg = self.work_group
+            cells = wg * max(float(self.press_cells), 1.0 / wg)
             wave = self.rt.device.max_compute_units // max(len(self._slots), 1)
             self._groups = max(1, min(MAX_GROUPS, wave, math.ceil(area / cells)))
             self._groups_key = key
@@ -596,7 +601,8 @@ class Boats:
                             p=sim.params, foot=self._foot, bodies=self._bodies,
                             out=self._bodies_out, transforms=self.transforms,
                             s=self._step_record(dt / n_sub, n_sub))
-        event = self._k_update.launch(self._n * groups * BODY_WG, BODY_WG)
+        wg = self.work_group
+        event = self._k_update.launch(self._n * groups * wg, wg)
         self._bodies, self._bodies_out = self._bodies_out, self._bodies
         return event
 

@@ -349,3 +349,29 @@ def test_several_groups_per_boat_press_what_one_group_and_the_whole_grid_do(rt):
     one = once(1)
     assert once(3) == one
     assert once(3) == one
+
+
+def test_work_group_size_changes_only_the_reduction_order(rt):
+    """Boats(work_group=...) (bench/bodies_stage.py --work-group): the same update within float32
+    round-off of the sums' order; a size the kernel cannot take is a one-line ValueError."""
+    def run(wg):
+        sim = br.pool(rt, dx=0.05, size=(2.0, 1.5), drag=0.0)
+        V, F = br.box(0.5, 0.3, 0.3)
+        boats = Boats(sim, [BoatSpec(V, F, mass=12.0, position=(0.8, 0.55, 0.7),
+                                     mass_height=0.08)],
+                      rt.buffer(48), [0], work_group=wg)
+        assert boats.work_group == wg
+        boats.set_velocity(0, (0.5, 0.0, 0.1))
+        sim.step(40)
+        st = boats.state()
+        return st["pos"][0, :3].copy(), st["vel"][0, :3].copy(), boats.pressure_head()
+
+    pos, vel, head = run(512)
+    for wg in (128, 1024):
+        p, v, h = run(wg)
+        np.testing.assert_allclose(p, pos, rtol=0, atol=1e-5)
+        np.testing.assert_allclose(v, vel, rtol=0, atol=1e-4)
+        np.testing.assert_allclose(h, head, rtol=0, atol=1e-5)
+    sim = br.pool(rt, dx=0.05, size=(2.0, 1.5), drag=0.0)
+    with pytest.raises(ValueError, match="work_group=300; allowed 128, 256, 512, 1024"):
+        Boats(sim, [], rt.buffer(48), [], work_group=300)
