@@ -556,7 +556,7 @@ class Viewer:
         self.fb_size = tuple(glfw.get_framebuffer_size(self.win))
         self._start_window = tuple(window_size)
         self.win_size = tuple(glfw.get_window_size(self.win))
-        self.path = display_path(upload)
+        self.path = display_path("direct" if upload == "direct" else "pbo")  # probe: a copy
         if callable(quality):   # decided here, its probe frames shown as the window shows
             glfw.swap_interval(0)   # them, but not waiting for the display's refresh
             quality = quality(self)

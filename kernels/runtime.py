@@ -134,7 +134,7 @@ class Runtime:
 
     def __init__(self, device: cl.Device | str | None = None, *, profiling: bool = True,
                  bvh_layout: str | None = None, kernel_arg_info: bool = True,
-                 defines: dict | None = None, context: cl.Context | None = None):
+                 defines: dict | None = None):
         """``bvh_layout``: how scenes store their BLASes for traversal, ``"binary"`` or
         ``"wide"`` (raytrace.bvh_wide); default ``LBWATER_BVH_LAYOUT`` or, unset, binary on a GPU
         and wide on a CPU. Every program is built with the matching ``TRACE_WIDE`` define unless
@@ -142,13 +142,9 @@ class Runtime:
         kernels.launch reads argument names off the device (False: from the sources, the
         fallback for devices without argument info; tests use it). ``defines``: added to every
         build (e.g. ``{"TRACE_COUNT": 1}``, the traversal work counters of kernels/traverse.h);
-        a program's own defines win. ``context``: an existing context holding the device (e.g.
-        one of another library's); default a new one."""
+        a program's own defines win."""
         self.device = device if isinstance(device, cl.Device) else select_device(device)
-        if context is not None and self.device.int_ptr not in [d.int_ptr for d in
-                                                               context.devices]:
-            raise ValueError(f"Runtime: the given context does not hold {self.device.name}")
-        self.context = context if context is not None else cl.Context([self.device])
+        self.context = cl.Context([self.device])
         props = cl.command_queue_properties.PROFILING_ENABLE if profiling else 0
         self.queue = cl.CommandQueue(self.context, self.device, properties=props)
         self._queue_props = props

@@ -13,31 +13,14 @@ from app.errors import InputError
 from app.scene import load_scene, parse_scene
 from app.timeline import Timeline
 from lbm.bodies import quat_from_matrix
-from tests.lbm.test_cmd_simulate import BOX_OBJ
+from tests.lbm.test_cmd_simulate import BOAT_SCENE, BOX_OBJ
 
-SCENE = """
-[scene]
-name = "boat timeline"
-
+SCENE = BOAT_SCENE + """
 [camera]
 eye = [0.8, 1.5, -1.5]
 target = [0.8, 0.3, 0.5]
 fov = 50
-
-[water]
-size = [1.6, 1.0]
-cells = [32, 20]
-depth = 0.3
-viscosity = 1e-3
-
-[[boats]]
-name = "box"
-file = "box.obj"
-mass = 9.0
-mass_height = 0.05
-position = [0.8, 0.28, 0.5]
-rotation = [0.0, 30.0, 0.0]
-"""
+"""   # the boat is named "box" after its file
 
 
 def _scene(tmp_path, timeline=""):

@@ -57,6 +57,16 @@ def pool(rt, dx=0.1, size=(3.0, 2.0), depth=0.5, drag=1.0, **kw):
     return lbm.ShallowWater(nx, ny, dx, device=rt, depth=depth, viscosity=1e-3, drag=drag, **kw)
 
 
+def uneven_water(rt, n=16, dx=0.1):
+    """An n x n pool of 0.5 m water with a smooth bump and a swirl (uneven and moving)."""
+    jj, ii = np.mgrid[0:n, 0:n]
+    x, z = (ii + 0.5) * dx, (jj + 0.5) * dx
+    sim = lbm.ShallowWater(n, n, dx, device=rt, depth=0.5, viscosity=1e-3)
+    sim.set_state(0.5 + 0.03 * np.sin(3 * x) * np.cos(2 * z), 0.2 * np.cos(2 * z),
+                  0.1 * np.sin(3 * x))
+    return sim
+
+
 def run(sim, boats, seconds, k=4, every=None):
     """Frames of k water steps (the coupled boats follow through their hook); yields (time,
     positions, speeds)."""

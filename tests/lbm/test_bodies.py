@@ -8,9 +8,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import lbm
 from lbm.bodies import Boats, BoatSpec, HullError, check_closed, matrix_from_quat, solid_properties
-from tests.lbm.bodies_ref import body64, box, forces, icosphere, pool, read_obj, run, water_sampler
+from tests.lbm.bodies_ref import (
+    body64,
+    box,
+    forces,
+    icosphere,
+    pool,
+    read_obj,
+    run,
+    uneven_water,
+    water_sampler,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -192,12 +201,7 @@ def test_many_frames_stay_finite(rt):
 def test_force_torque_reduction_matches_float64(rt):
     """The device reduction over a tilted, moving hull on uneven, moving water equals the float64
     NumPy sum of the same column forces (N, N m) to float32 accuracy."""
-    n, dx = 16, 0.1
-    jj, ii = np.mgrid[0:n, 0:n]
-    x, z = (ii + 0.5) * dx, (jj + 0.5) * dx
-    sim = lbm.ShallowWater(n, n, dx, device=rt, depth=0.5, viscosity=1e-3)
-    sim.set_state(0.5 + 0.03 * np.sin(3 * x) * np.cos(2 * z), 0.2 * np.cos(2 * z),
-                  0.1 * np.sin(3 * x))
+    sim = uneven_water(rt)
     V, F = box(0.6, 0.3, 0.4)
     c, s = math.cos(0.2), math.sin(0.2)
     R = np.array([[1, 0, 0], [0, c, -s], [0, s, c]]) @ np.array([[c, 0, s], [0, 1, 0],

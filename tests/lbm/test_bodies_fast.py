@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import lbm
 from lbm import bodies as lb
 from lbm.bodies import Boats, BoatSpec
 from tests.lbm import bodies_ref as br
@@ -105,12 +104,7 @@ def test_box_pass_equals_the_whole_grid_pass_as_boats_move(rt):
 def test_substeps_in_one_launch_match_float64(rt):
     """Three substeps of a tilted, moving hull on uneven, moving water, in one launch, equal
     three float64 substeps (forces re-summed at each pose against the same water)."""
-    n, dx = 16, 0.1
-    jj, ii = np.mgrid[0:n, 0:n]
-    x, z = (ii + 0.5) * dx, (jj + 0.5) * dx
-    sim = lbm.ShallowWater(n, n, dx, device=rt, depth=0.5, viscosity=1e-3)
-    sim.set_state(0.5 + 0.03 * np.sin(3 * x) * np.cos(2 * z), 0.2 * np.cos(2 * z),
-                  0.1 * np.sin(3 * x))
+    sim = br.uneven_water(rt)
     origin = (0.3, -0.1, 0.2)
     spec = BoatSpec(*br.box(0.6, 0.3, 0.4), mass=20.0, position=(1.1, 0.3, 1.0),
                     rotation=_rot(0.2, 0.2), mass_height=0.1)
