@@ -230,8 +230,11 @@ def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
     lines.append(f"{w}x{h}  {spp} spp  {bounces} bounces  "
                  + (f"grid {cells[0]}x{cells[1]}" if cells else "no water" if stats else "")
                  + (f"  caustics {caustics}" if caustics else ""))
+    # the path, and on a line of its own why the shared path is not used (app.window)
+    shown = [f"display: {part}" if k == 0 else f"  {part}"
+             for k, part in enumerate(path.split("; "))]
     if stats is None:   # before the first frame (or a rebuild's): the settings, the path
-        return lines + [f"display: {path}"]
+        return lines + shown
     lines.append(f"{stats.n_triangles:,} triangles  {stats.n_rays / 1e6:.2f} M rays/frame")
     ms = sorted(stats.stage_ms.items(), key=lambda kv: -kv[1])
     kernel = sum(v for _, v in ms)
@@ -239,7 +242,7 @@ def hud_lines(stats, *, fps: float, path: str, size=(0, 0), device: str = "",
     for name, v in ms[:top]:
         lines.append(f"  {name}\t{v:.3f} ms")
     lines.append(f"device: {device}")
-    lines.append(f"display: {path}")
+    lines.extend(shown)
     if quality:
         lines.append(quality)
     return [s for s in lines if s]

@@ -351,6 +351,8 @@ def test_hud_lines_show_fps_stages_grid_rays_device_and_guard_warnings():
         assert want in text
     assert guard_lines(Stats) == ["water: 7 cell updates limited (max Froude 0.91)"]
     assert hud_lines(None, fps=0, path="copy")[-1] == "display: copy"
+    assert hud_lines(None, fps=0, path="copy (x); shared path unavailable: y")[-2:] == [
+        "display: copy (x)", "  shared path unavailable: y"]
     before = hud_lines(None, fps=0, path="copy", size=(64, 48), caustics="off")
     assert "caustics off" in before[1] and "grid" not in before[1]
     assert help_lines([("R", "rain")])[1] == "R\train"
