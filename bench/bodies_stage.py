@@ -9,6 +9,7 @@ DIR/bodies_stage.json.
 
     python3 bench/bodies_stage.py --cells 1024 --boats 1 16 --frames 60 --out DIR
     python3 bench/bodies_stage.py --cells 1024 --boats 1 16 --groups 0 1 4 8 16 32 --out DIR
+    python3 bench/bodies_stage.py --cells 1024 --boats 1 16 --press-batch 1 2 4 8 --out DIR
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ sys.path.insert(0, str(ROOT))
 
 
 def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
-            every_step: bool, groups: int = 0, work_group: int = 512) -> dict:
+            every_step: bool, groups: int = 0, work_group: int = 512,
+            press_batch: int = 4) -> dict:
     import lbm
     from app.assemble import water_spec
     from app.bench_frame import with_boats
@@ -35,7 +37,7 @@ def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
     sim = lbm.from_water_spec(water, device=rt)
     bodies = boat_bodies(sc)
     boats = make_boats(sc, sim, bodies, rt.buffer(48 * len(bodies)), list(range(len(bodies))),
-                       work_group=work_group)
+                       work_group=work_group, press_batch=press_batch)
     if every_step:
         boats.max_substep = sim.dt * (1 + 1e-6)
     if groups > 0:
@@ -57,7 +59,7 @@ def measure(rt, scene, cells: int, n_boats: int, frames: int, warmup: int,
             "cadence": "every step" if every_step else f"every {boats.every} steps",
             "water_steps_per_frame": per_frame, "updates_per_frame": round(updates, 2),
             "launches_per_frame": round(updates, 2), "groups_per_boat": groups,
-            "work_group": work_group,
+            "work_group": work_group, "press_batch": press_batch,
             "bodies_ms": round(bodies_ms, 4),
             "ms_per_launch": round(bodies_ms / updates, 4),
             "lbm_step_ms": round(statistics.median(r.get("lbm.step", 0.0) for r in rows), 4)}
@@ -76,6 +78,8 @@ def main(argv=None) -> int:
                    help="work-items per work-group of the update (128, 256, 512, 1024)")
     p.add_argument("--every-step", action="store_true",
                    help="also time an update after every water step (the old cadence)")
+    p.add_argument("--press-batch", type=int, nargs="+", default=[4],
+                   help="cells per work-item per step of the pressure pass (1, 2, 4, 8)")
     p.add_argument("--device", default=None)
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
@@ -87,12 +91,14 @@ def main(argv=None) -> int:
     out = []
     for n in args.boats:
         for every_step in ((False, True) if args.every_step else (False,)):
-            for g, wg in ((g, wg) for g in args.groups for wg in args.work_group):
+            for g, wg, pb in ((g, wg, pb) for g in args.groups for wg in args.work_group
+                              for pb in args.press_batch):
                 row = measure(rt, scene, args.cells, n, args.frames, args.warmup, every_step, g,
-                              wg)
+                              wg, pb)
                 out.append(row)
                 print(f"{row['cells']} {n:2d} boats, {row['cadence']}, {row['groups_per_boat']}"
-                      f" groups/boat of {wg}: bodies {row['bodies_ms']:.4f} ms/frame "
+                      f" groups/boat of {wg}, press batch {pb}: bodies "
+                      f"{row['bodies_ms']:.4f} ms/frame "
                       f"({row['ms_per_launch']:.4f} per launch), "
                       f"{row['launches_per_frame']} launches/frame, lbm.step "
                       f"{row['lbm_step_ms']:.3f} ms", flush=True)

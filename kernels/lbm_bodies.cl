@@ -102,6 +102,40 @@ int lbm_boxes_meet(const int4 a, const int4 b)
     return a.x <= b.z && b.x <= a.z && a.y <= b.w && b.y <= a.w;
 }
 
+/* The footprint column of hull ``pb`` under world (X, Z): its index in ``foot``, and its grid
+ * position in *ixz (-1: none, the point is off the hull's bounding circle or footprint grid). */
+int lbm_hull_column(__local const LbmPressBody* pb, const float X, const float Z, int2* ixz)
+{
+    *ixz = (int2)(-1);
+    if (pb->n.w == 0) return -1;
+    const float4 pos = pb->pos;
+    const float dxw = X - pos.x, dzw = Z - pos.z;
+    if (dxw * dxw + dzw * dzw > pos.w * pos.w) return -1;
+    const float3 loc = lbm_rot_t(pb->r0.xyz, pb->r1.xyz, pb->r2.xyz,
+                                 (float3)(dxw, pb->r0.w - pos.y, dzw));
+    const float4 fp = pb->foot;
+    const int4 fn = pb->n;
+    const int ix = (int)round((loc.x - fp.x) / fp.z);
+    const int iz = (int)round((loc.z - fp.y) / fp.w);
+    if (ix < 0 || iz < 0 || ix >= fn.x || iz >= fn.y) return -1;
+    *ixz = (int2)(ix, iz);
+    return fn.z + iz * fn.x + ix;
+}
+
+/* Hull ``pb``'s pressure head clamp(L - Y_b, 0, Y_t - Y_b) over its footprint column at grid
+ * position ``ixz`` (lbm_hull_column) holding (bottom, top) ``col``. */
+float lbm_hull_column_head(__local const LbmPressBody* pb, const int2 ixz, const float2 col)
+{
+    if (col.y < col.x) return 0.0f;
+    const float xc = pb->foot.x + (float)ixz.x * pb->foot.z;
+    const float zc = pb->foot.y + (float)ixz.y * pb->foot.w;
+    const float3 r1 = pb->r1.xyz;
+    const float yb = pb->pos.y + dot(r1, (float3)(xc, col.x, zc));
+    const float yt = pb->pos.y + dot(r1, (float3)(xc, col.y, zc));
+    const float lo = fmin(yb, yt), hi = fmax(yb, yt);
+    return clamp(pb->r0.w - lo, 0.0f, hi - lo);
+}
+
 /* The hulls' pressure head (m) at world (X, Z): over the bodies in ``mask`` (bit b: body b, in
  * increasing b), per hull over it, clamp(L - Y_b, 0, Y_t - Y_b) of its nearest footprint column. */
 float lbm_hull_head(__local const LbmPressBody* l_b, const int mask,
@@ -110,50 +144,18 @@ float lbm_hull_head(__local const LbmPressBody* l_b, const int mask,
     float d = 0.0f;
     for (int m = mask; m != 0; m &= m - 1) {
         const int b = 31 - clz(m & -m);
-        if (l_b[b].n.w == 0) continue;
-        const float4 pos = l_b[b].pos;
-        const float dxw = X - pos.x, dzw = Z - pos.z;
-        if (dxw * dxw + dzw * dzw > pos.w * pos.w) continue;
-        const float3 r0 = l_b[b].r0.xyz, r1 = l_b[b].r1.xyz, r2 = l_b[b].r2.xyz;
-        const float L = l_b[b].r0.w;
-        const float4 fp = l_b[b].foot;
-        const int4 fn = l_b[b].n;
-        const float3 loc = lbm_rot_t(r0, r1, r2, (float3)(dxw, L - pos.y, dzw));
-        const int ix = (int)round((loc.x - fp.x) / fp.z);
-        const int iz = (int)round((loc.z - fp.y) / fp.w);
-        if (ix < 0 || iz < 0 || ix >= fn.x || iz >= fn.y) continue;
-        const float2 col = foot[fn.z + iz * fn.x + ix];
-        if (col.y < col.x) continue;
-        const float xc = fp.x + (float)ix * fp.z;
-        const float zc = fp.y + (float)iz * fp.w;
-        const float yb = pos.y + dot(r1, (float3)(xc, col.x, zc));
-        const float yt = pos.y + dot(r1, (float3)(xc, col.y, zc));
-        const float lo = fmin(yb, yt), hi = fmax(yb, yt);
-        d += clamp(L - lo, 0.0f, hi - lo);
+        int2 ixz;
+        const int k = lbm_hull_column(&l_b[b], X, Z, &ixz);
+        if (k >= 0) d += lbm_hull_column_head(&l_b[b], ixz, foot[k]);
     }
     return d;
 }
 
-/* Head (m, world y, above origin.y), velocity (m/s, world x and z) of cell (i, j): the bed the
- * water's force sees there (bed + the hulls' pressure head, as the pressure pass writes it into
- * zforce, here from the records of ``mask`` at the start of the update) plus the depth. */
-void lbm_water_cell(__global const LBM_FT* f, __global const float* bed,
-                    __local const LbmPressBody* l_b0, const int mask,
-                    __global const float2* foot, const LbmParams p, const float4 origin,
-                    const int i, const int j, float* H, float* u, float* v)
-{
-    const int n = LBM_CELL(p, i, j);
-    float fl[9], h, mx, my;
-    for (int a = 0; a < 9; ++a) fl[a] = lbm_load(f, a, n, p);
-    lbm_moments(fl, &h, &mx, &my);
-    const float X = origin.x + ((float)i + 0.5f) * p.dx;
-    const float Z = origin.z + ((float)j + 0.5f) * p.dx;
-    *H = (bed[n] + lbm_hull_head(l_b0, mask, foot, X, Z)) + h;
-    *u = p.e * mx / h;
-    *v = p.e * my / h;
-}
-
-/* The water at world (X, Z): bilinear between cell centres, clamped to the grid. */
+/* The water at world (X, Z): bilinear between cell centres, clamped to the grid. Head (m, world
+ * y) = origin.y + the bed the water's force sees (bed + the pressure head of the hulls in ``mask``
+ * as the pressure pass writes it into zforce, here from the records at the start of the update,
+ * l_b0) + the depth; velocity (m/s, world x and z). With one hull in ``mask`` (the usual case) the
+ * four cells' footprint columns are found first and all their reads are in flight together. */
 void lbm_water_at(__global const LBM_FT* f, __global const float* bed,
                   __local const LbmPressBody* l_b0, const int mask,
                   __global const float2* foot, const LbmParams p, const float4 origin,
@@ -164,16 +166,39 @@ void lbm_water_at(__global const LBM_FT* f, __global const float* bed,
     const int i0 = min((int)gx, p.nx - 1), j0 = min((int)gz, p.ny - 1);
     const int i1 = min(i0 + 1, p.nx - 1), j1 = min(j0 + 1, p.ny - 1);
     const float fx = gx - (float)i0, fz = gz - (float)j0;
-    float H00, u00, v00, H10, u10, v10, H01, u01, v01, H11, u11, v11;
-    lbm_water_cell(f, bed, l_b0, mask, foot, p, origin, i0, j0, &H00, &u00, &v00);
-    lbm_water_cell(f, bed, l_b0, mask, foot, p, origin, i1, j0, &H10, &u10, &v10);
-    lbm_water_cell(f, bed, l_b0, mask, foot, p, origin, i0, j1, &H01, &u01, &v01);
-    lbm_water_cell(f, bed, l_b0, mask, foot, p, origin, i1, j1, &H11, &u11, &v11);
+    const int one = (mask != 0 && (mask & (mask - 1)) == 0) ? 31 - clz(mask) : -1;
+    int n[4], k[4];
+    int2 ixz[4];
+    float Xc[4], Zc[4], bz[4], fl[4][9];
+    float2 col[4];
+    for (int q = 0; q < 4; ++q) {
+        const int i = (q & 1) ? i1 : i0, j = (q & 2) ? j1 : j0;
+        n[q] = LBM_CELL(p, i, j);
+        Xc[q] = origin.x + ((float)i + 0.5f) * p.dx;
+        Zc[q] = origin.z + ((float)j + 0.5f) * p.dx;
+        k[q] = one >= 0 ? lbm_hull_column(&l_b0[one], Xc[q], Zc[q], &ixz[q]) : -1;
+    }
+    for (int q = 0; q < 4; ++q) {
+        bz[q] = bed[n[q]];
+        col[q] = k[q] >= 0 ? foot[k[q]] : (float2)(0.0f);
+        for (int a = 0; a < 9; ++a) fl[q][a] = lbm_load(f, a, n[q], p);
+    }
+    float Hq[4], uq[4], vq[4];
+    for (int q = 0; q < 4; ++q) {
+        float h, mx, my;
+        lbm_moments(fl[q], &h, &mx, &my);
+        const float d = one >= 0 ? (k[q] >= 0 ? lbm_hull_column_head(&l_b0[one], ixz[q], col[q])
+                                              : 0.0f)
+                                 : lbm_hull_head(l_b0, mask, foot, Xc[q], Zc[q]);
+        Hq[q] = (bz[q] + d) + h;
+        uq[q] = p.e * mx / h;
+        vq[q] = p.e * my / h;
+    }
     const float w00 = (1.0f - fx) * (1.0f - fz), w10 = fx * (1.0f - fz);
     const float w01 = (1.0f - fx) * fz, w11 = fx * fz;
-    *H = origin.y + w00 * H00 + w10 * H10 + w01 * H01 + w11 * H11;
-    *u = w00 * u00 + w10 * u10 + w01 * u01 + w11 * u11;
-    *v = w00 * v00 + w10 * v10 + w01 * v01 + w11 * v11;
+    *H = origin.y + w00 * Hq[0] + w10 * Hq[1] + w01 * Hq[2] + w11 * Hq[3];
+    *u = w00 * uq[0] + w10 * uq[1] + w01 * uq[2] + w11 * uq[3];
+    *v = w00 * vq[0] + w10 * vq[1] + w01 * vq[2] + w11 * vq[3];
 }
 
 #define LBM_BODY_ACC 9   /* force (3), torque (3), submerged volume, ring head sum, ring count */
@@ -520,20 +545,39 @@ void lbm_bodies_update(__global const LBM_FT* restrict f, __global float* zforce
     const int4 box = lbm_press_cells(l_body[b].box, l_body[b].box_old);
     const int lower = cluster & ((1 << b) - 1);
     const int w = box.z - box.x + 1, area = w * (box.w - box.y + 1);
-    for (int c0 = tile * LBM_BODY_WG; c0 < area; c0 += groups * LBM_BODY_WG) {
-        const int c = c0 + lid;   /* (a loop uniform over the group: PoCL miscompiled the other) */
-        const int i = box.x + c % w, j = box.y + c / w;
-        int mine = c < area;
-        for (int o = lower; o != 0; o &= o - 1) {
-            const int4 oc = lbm_press_cells(l_body[31 - clz(o & -o)].box,
-                                            l_body[31 - clz(o & -o)].box_old);
-            if (i >= oc.x && i <= oc.z && j >= oc.y && j <= oc.w) mine = 0;
+    const int stride = groups * LBM_BODY_WG;
+    /* a body alone in its cluster (the usual case): its one hull, each cell's footprint column
+     * found first, so the batch's reads are in flight together */
+    const int alone = cluster == (1 << b);
+    for (int c0 = tile * LBM_BODY_WG; c0 < area; c0 += LBM_PRESS_BATCH * stride) {
+        /* (a loop uniform over the group: PoCL miscompiled the other) */
+        int cell[LBM_PRESS_BATCH], k[LBM_PRESS_BATCH];
+        int2 ixz[LBM_PRESS_BATCH];
+        float X[LBM_PRESS_BATCH], Z[LBM_PRESS_BATCH], bz[LBM_PRESS_BATCH];
+        float2 col[LBM_PRESS_BATCH];
+        for (int u = 0; u < LBM_PRESS_BATCH; ++u) {
+            const int c = c0 + u * stride + lid;
+            const int i = box.x + c % w, j = box.y + c / w;
+            int mine = c < area;
+            for (int o = lower; o != 0; o &= o - 1) {
+                const int4 oc = lbm_press_cells(l_body[31 - clz(o & -o)].box,
+                                                l_body[31 - clz(o & -o)].box_old);
+                if (i >= oc.x && i <= oc.z && j >= oc.y && j <= oc.w) mine = 0;
+            }
+            X[u] = s.origin.x + ((float)i + 0.5f) * p.dx;
+            Z[u] = s.origin.z + ((float)j + 0.5f) * p.dx;
+            cell[u] = mine ? LBM_CELL(p, i, j) : -1;
+            k[u] = (mine && alone) ? lbm_hull_column(&l_b[b], X[u], Z[u], &ixz[u]) : -1;
         }
-        if (mine) {
-            const float X = s.origin.x + ((float)i + 0.5f) * p.dx;
-            const float Z = s.origin.z + ((float)j + 0.5f) * p.dx;
-            const int cell = LBM_CELL(p, i, j);
-            zforce[cell] = bed[cell] + lbm_hull_head(l_b, cluster, foot, X, Z);
+        for (int u = 0; u < LBM_PRESS_BATCH; ++u) {
+            bz[u] = cell[u] >= 0 ? bed[cell[u]] : 0.0f;
+            col[u] = k[u] >= 0 ? foot[k[u]] : (float2)(0.0f);
+        }
+        for (int u = 0; u < LBM_PRESS_BATCH; ++u) {
+            if (cell[u] < 0) continue;
+            const float d = !alone ? lbm_hull_head(l_b, cluster, foot, X[u], Z[u])
+                            : (k[u] >= 0 ? lbm_hull_column_head(&l_b[b], ixz[u], col[u]) : 0.0f);
+            zforce[cell[u]] = bz[u] + d;
         }
     }
 }

@@ -16,6 +16,11 @@
 #ifndef LBM_BODY_WG   /* lbm/bodies.py Boats(work_group=...) may set it */
 #define LBM_BODY_WG 512
 #endif
+/* Cells per work-item per step of the update's pressure pass, their reads in flight together
+ * (lbm/bodies.py Boats(press_batch=...) may set it). */
+#ifndef LBM_PRESS_BATCH
+#define LBM_PRESS_BATCH 4
+#endif
 /* Partial sums per accumulator in the update's reduction (LBM_BODY_WG / 32 terms each). */
 #define LBM_BODY_PARTS 16
 /* Most bodies (lbm/bodies.py MAX_BOATS): the kernels stage them all in local memory. */

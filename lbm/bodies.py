@@ -39,6 +39,8 @@ from lbm.structs import BODY_DTYPE, BODY_STEP_DTYPE, record
 MAX_BOATS = 16
 #: kernels/lbm_bodies.h LBM_BODY_WG.
 BODY_WG = 512
+#: kernels/lbm_bodies.h LBM_PRESS_BATCH.
+PRESS_BATCH = 4
 #: Horizontal speed limit of a boat, m/s (kernels/lbm_bodies.h LBM_BODY_MAX_SPEED): faster is
 #: clamped. It bounds where a boat can be after an update, so the update knows from the start
 #: which boats' cells can meet.
@@ -325,7 +327,8 @@ class Boats:
 
     def __init__(self, sim, specs, transform_buffer: cl.Buffer, rows, *,
                  origin=(0.0, 0.0, 0.0), rho: float = RHO_WATER, max_substep: float = 1 / 120,
-                 coupled: bool = True, work_group: int = BODY_WG):
+                 coupled: bool = True, work_group: int = BODY_WG,
+                 press_batch: int = PRESS_BATCH):
         self.sim, self.rt = sim, sim.rt
         self.origin = _finite3("origin", origin)
         self.rho = float(rho)
@@ -349,8 +352,14 @@ class Boats:
         if work_group not in (128, 256, 512, 1024):
             raise ValueError(f"work_group={work_group}; allowed 128, 256, 512, 1024")
         self.work_group = int(work_group)   #: LBM_BODY_WG of the update kernel
-        defines = sim.defines if work_group == BODY_WG else {**sim.defines,
-                                                              "LBM_BODY_WG": work_group}
+        if press_batch not in (1, 2, 4, 8):
+            raise ValueError(f"press_batch={press_batch}; allowed 1, 2, 4, 8")
+        self.press_batch = int(press_batch)   #: LBM_PRESS_BATCH of the update kernel
+        defines = dict(sim.defines)
+        if work_group != BODY_WG:
+            defines["LBM_BODY_WG"] = self.work_group
+        if press_batch != PRESS_BATCH:
+            defines["LBM_PRESS_BATCH"] = self.press_batch
         self._k_update = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_update",
                                                  stage="lbm.bodies", defines=defines)
         self._k_press_all = self.rt.kernel_launcher("lbm_bodies.cl", "lbm_bodies_press_all",

@@ -28,6 +28,7 @@ def test_header_constants_match_the_host():
     text = (Path(lb.__file__).parents[1] / "kernels" / "lbm_bodies.h").read_text()
     defs = dict(re.findall(r"#define (LBM_\w+) (\d+)", text))
     assert int(defs["LBM_BODY_WG"]) == lb.BODY_WG
+    assert int(defs["LBM_PRESS_BATCH"]) == lb.PRESS_BATCH
     assert int(defs["LBM_MAX_BODIES"]) == lb.MAX_BOATS
     assert int(defs["LBM_BODY_MAX_SPEED"]) == lb.MAX_SPEED
 
@@ -312,15 +313,16 @@ def test_several_groups_per_boat_press_what_one_group_and_the_whole_grid_do(rt):
     fine enough that a boat presses over 512 cells, updated by 3 work-groups per boat (each
     recomputes the cluster's update, then presses its tile): after every update the pressure
     head is the bytes the whole-grid pass leaves, and records, transform rows and pressure head
-    are the bytes that one work-group per boat leaves, on a rerun too."""
-    def once(groups):
+    are the bytes that one work-group per boat leaves, on a rerun too, whatever the press pass's
+    batch of cells per work-item (a lone boat's and the cluster's code paths)."""
+    def once(groups, press_batch=lb.PRESS_BATCH):
         sim = br.pool(rt, dx=0.02, size=(2.4, 1.2), drag=0.0)
         V, F = br.box(0.5, 0.3, 0.3)
         specs = [BoatSpec(V, F, mass=12.0, position=p, mass_height=0.08, rotation=_rot(r))
                  for p, r in (((0.6, 0.52, 0.6), 0.3), ((1.65, 0.52, 0.45), 0.0),
                               ((1.85, 0.52, 0.8), 0.5))]
         T = rt.buffer(48 * 3)
-        boats = Boats(sim, specs, T, [0, 1, 2], coupled=False)
+        boats = Boats(sim, specs, T, [0, 1, 2], coupled=False, press_batch=press_batch)
         boats.press_groups = groups
         boats.set_velocity(0, (3.0, 0.0, 0.4))
         boats.set_velocity(2, (-0.5, 0.0, 0.0))
@@ -343,6 +345,11 @@ def test_several_groups_per_boat_press_what_one_group_and_the_whole_grid_do(rt):
     one = once(1)
     assert once(3) == one
     assert once(3) == one
+    assert once(3, press_batch=1) == one
+    assert once(2, press_batch=8) == one
+    sim = br.pool(rt, dx=0.05, size=(2.0, 1.5), drag=0.0)
+    with pytest.raises(ValueError, match="press_batch=3; allowed 1, 2, 4, 8"):
+        Boats(sim, [], rt.buffer(48), [], press_batch=3)
 
 
 def test_work_group_size_changes_only_the_reduction_order(rt):
