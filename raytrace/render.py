@@ -33,6 +33,16 @@ to overlap only the tail levels of few rays. The levels' hits live in two buffer
 radiance too; unfused, level d + 1's shade runs after level d's accumulation on the in-order
 queue and one radiance buffer serves.
 
+``coop_from`` D (None: off) traverses the trace and shadow rays of the levels from D on one per
+work-group of 32 (``kernels/traverse_coop.h``, the ``*_coop`` kernels of a ``TRACE_COOP=1``
+build, launched for about one group per ray): the tail levels (1080p on the H200: 36k, 12k, 4k,
+0.9k rays at depths 2-5) are latency-bound, each launch about one ray's chain of ~200-300
+dependent node reads (0.16 ms for 884 rays), and 32 work-items popping 32 nodes a round shorten
+that chain. Either order; level d - 1's shadow rays in the combined launch stay one per
+work-item when d - 1 < D. The image is the per-work-item one except where two triangles are hit
+at exactly the same distance (the walk then keeps the smallest instance and triangle ids), and
+for one ``coop_from`` the same bytes in either order.
+
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
 the shading), either order. Every kernel (``kernels.launch.Kernel``) belongs to this renderer
 (one per depth level; the tonemap pass and the scatter alone have their own gather objects) and
