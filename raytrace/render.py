@@ -465,7 +465,7 @@ class Renderer:
                 k["shadow_trace"].bind(**scene, **shading, **light, **last, **wave, hits=hits)
                 k["shadow_trace_shade"].bind(**scene, **shading, **light, **last,
                                              cam=self.camera_buf, **wave, hits=hits, **out)
-            if "trace_coop" in k:   # the same arguments (level d - 1's shadow rays per group?)
+            if "trace_coop" in k:   # the cooperative flavours: the same arguments
                 k["trace_coop"].bind(**scene, **wave, hits=hits)
                 k["trace_shade_coop"].bind(**scene, **shading, cam=self.camera_buf, **wave,
                                            hits=hits, **out)
@@ -648,9 +648,10 @@ class Renderer:
                 launch(k["scan"], scan_size, scan_ls)
                 bind(k["scatter"], gp=g_scatter)
                 launch(k["scatter"], scatter_size, ls)
-                if has_lights and coop(depth + 1):   # by groups; this level's shadow rays too,
+                if has_lights and coop(depth + 1):
+                    # a group per ray of level d + 1 (and of level d's shadow rays if coop(d),
+                    # else a work-item per shadow ray: the serial part runs first)
                     groups = coop_size(max(next_size[0], ray_size[0] * coop(depth)))
-                    # or else one per work-item first
                     serial = 0 if coop(depth) else -(-ray_size[0] // COOP_WIDTH) * COOP_WIDTH
                     launch(nxt["shadow_" + trace + "_coop"], (max(groups[0], serial),),
                            (COOP_WIDTH,))
