@@ -50,6 +50,10 @@ def add_arguments(p) -> None:
     p.add_argument("--overlap-from", type=int, default=None, metavar="D",
                    help="overlap only the levels from depth D on (default: "
                         "RenderSettings.overlap_from, 1)")
+    p.add_argument("--coop-from", type=int, default=None, metavar="D",
+                   help="traverse the trace and shadow rays of depth D on one per work-group of "
+                        "32 (RenderSettings.coop_from: the latency-bound tail levels; default: "
+                        "none, one ray per work-item)")
     p.add_argument("--host-copy", action="store_true",
                    help="copy each image out of the pinned read-back array and check its pixels "
                         "inside the timed loop (the cost a read_frame() caller adds)")
@@ -109,6 +113,9 @@ def run(args) -> int:
     overlap_from = getattr(args, "overlap_from", None)
     if overlap_from is not None and not 0 <= overlap_from <= MAX_DEPTH:
         raise InputError(f"--overlap-from {overlap_from} is out of range; allowed [0, {MAX_DEPTH}]")
+    coop_from = getattr(args, "coop_from", None)
+    if coop_from is not None and not 0 <= coop_from <= MAX_DEPTH:
+        raise InputError(f"--coop-from {coop_from} is out of range; allowed [0, {MAX_DEPTH}]")
     rt = get_runtime(args.device)
     rows = []
     for cells in args.cells:
@@ -117,6 +124,7 @@ def run(args) -> int:
         if getattr(args, "per_depth", False):
             world.renderer.set_stage_per_depth(True)
         world.renderer.set_overlap(not getattr(args, "no_overlap", False), overlap_from)
+        world.renderer.set_coop(coop_from)
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -161,6 +169,7 @@ def run(args) -> int:
                "bvh": "rebuild" if args.rebuild else "refit", "host_copy": host_copy,
                "overlap": world.renderer.settings.overlap_levels,
                "overlap_from": world.renderer.settings.overlap_from,
+               "coop_from": world.renderer.settings.coop_from,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,
                "rays_per_depth": " ".join(str(n) for n in st.rays_per_depth),

@@ -1,7 +1,9 @@
 /* Renderer stages: shading of each hit (ambient, sky on a miss, child counts for the compaction,
  * primary AOVs) and direct light through shadow rays (Phong per light when unoccluded). Two
  * kernels: fused into one, the shading state kept live across the shadow traversal cost 15-50%
- * on the H100 (measured 2026-11-23). Both loop with a grid stride (see render_trace.cl). */
+ * on the H100 (measured 2026-11-23). Both loop with a grid stride (see render_trace.cl); built
+ * with TRACE_COOP=1, render_shadow_coop traces each hit's shadow rays with a whole work-group
+ * (traverse_coop.h; RenderSettings.coop_from). */
 #include "common.h"
 #include "render_surface.h"
 #include "render_shadow.h"
@@ -28,6 +30,22 @@ __kernel void render_shadow(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const R
 {
     const uint n = counts[depth];
     for (uint i = get_global_id(0); i < n; i += get_global_size(0))
-        shadow_ray(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, i, radiance,
+        shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, i, radiance,
                    caustic_map, &cprm);
 }
+
+#if TRACE_COOP
+__kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void render_shadow_coop(
+    SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+    __global const Light* restrict lights, __global const Ray* restrict rays,
+    __global const Hit* restrict hits, __global const uint* counts, const uint depth,
+    __global float4* restrict radiance, __global const float4* restrict caustic_map,
+    const CausticParams cprm)
+{
+    __local TraceCoop coop;
+    const uint n = counts[depth];
+    for (uint i = get_group_id(0); i < n; i += get_num_groups(0))
+        shadow_ray(TRACE_COOP_ARGS(&coop), RENDER_GEOM_ARGS, prm, lights, rays, hits, i,
+                   radiance, caustic_map, &cprm);
+}
+#endif

@@ -6,7 +6,7 @@
 
 #include "caustics.h"
 #include "render_surface.h"
-#include "traverse.h"
+#include "traverse_coop.h"
 
 inline float smooth01(float e0, float e1, float x)
 {
@@ -21,20 +21,20 @@ inline float smooth01(float e0, float e1, float x)
  * instances (RENDER_MASK_OPAQUE: it ends at the first blocker and never enters the water's
  * tree), then the crossings, closest hit by closest hit, of the instances that hold a
  * dielectric (RENDER_MASK_TRANSMISSIVE; an opaque triangle there still blocks). */
-inline float3 shadow_transmittance(SCENE_PARAMS, RENDER_GEOM_PARAMS,
+inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS,
                                    __constant const RenderParams* prm, float3 org, float3 dir,
                                    float tmax, int medium)
 {
     /* one any-hit call site for both cases (one traversal less inlined) */
     const uint opaque = prm->transmissive_shadows ? RENDER_MASK_OPAQUE : ~0u;
-    if (scene_any_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))
+    if (trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))
         return (float3)(0.0f);
     if (!prm->transmissive_shadows) return (float3)(1.0f);
     float3 T = (float3)(1.0f);
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
-        const Hit h = scene_closest_hit_masked(SCENE_ARGS, org, dir, 0.0f, tmax,
-                                               RENDER_MASK_TRANSMISSIVE,
-                                               TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
+        const Hit h = trace_closest_masked(TRACE_ARGS, org, dir, 0.0f, tmax,
+                                           RENDER_MASK_TRANSMISSIVE,
+                                           TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
         if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;
@@ -55,7 +55,8 @@ inline float3 shadow_transmittance(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     return (float3)(0.0f);
 }
 
-inline void shadow_ray(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+/* With coop_on, the whole work-group runs it for ray i alike; one work-item adds the light. */
+inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
                        __global const Light* restrict lights, __global const Ray* restrict rays,
                        __global const Hit* restrict hits, uint i,
                        __global float4* restrict radiance,
@@ -104,12 +105,12 @@ inline void shadow_ray(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Render
             sum += E * brdf;
             continue;
         }
-        const float3 T = shadow_transmittance(SCENE_ARGS, RENDER_GEOM_ARGS, prm, org, ldir, dist,
+        const float3 T = shadow_transmittance(TRACE_ARGS, RENDER_GEOM_ARGS, prm, org, ldir, dist,
                                               r.medium);
         if (max3(T) <= 0.0f) continue;
         sum += T * E * brdf;
     }
-    radiance[i] += (float4)(w * sum, 0.0f);
+    if (TRACE_LEADER) radiance[i] += (float4)(w * sum, 0.0f);
 }
 
 #endif

@@ -7,7 +7,10 @@
  * j - counts[depth - 1] of level depth: the same per-ray bodies as render_shadow
  * (render_shadow.h) and render_trace / render_trace_shade (render_trace.h, shade_hit), so the
  * image is the same byte for byte. The levels' hits (and, shaded here, their radiance) live in
- * buffers of their own parity. */
+ * buffers of their own parity.
+ * Built with TRACE_COOP=1, the *_coop kernels trace level depth's rays one per work-group
+ * (traverse_coop.h; RenderSettings.coop_from), and level depth - 1's shadow rays too when
+ * coop_shadow, else one per work-item first (level coop_from - 1 is not a tail level). */
 #include "common.h"
 #include "render_shadow.h"
 #include "render_surface.h"
@@ -27,12 +30,12 @@ __kernel void render_shadow_trace(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     const uint n_shadow = counts[depth - 1u], n = n_shadow + counts[depth];
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
         if (j < n_shadow) {
-            shadow_ray(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits, j,
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits, j,
                        shadow_radiance, caustic_map, &cprm);
         } else {
             const uint i = j - n_shadow;
             const Ray r = rays[i];
-            hits[i] = trace_ray(SCENE_ARGS, &r, depth);
+            hits[i] = trace_ray(TRACE_SERIAL_ARGS, &r, depth);
         }
     }
 }
@@ -57,15 +60,83 @@ __kernel void render_shadow_trace_shade(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     const uint n_shadow = counts[depth - 1u], n = n_shadow + counts[depth];
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
         if (j < n_shadow) {
-            shadow_ray(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits, j,
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits, j,
                        shadow_radiance, caustic_map, &cprm);
         } else {
             const uint i = j - n_shadow;
             const Ray r = rays[i];
-            const Hit h = trace_ray(SCENE_ARGS, &r, depth);
+            const Hit h = trace_ray(TRACE_SERIAL_ARGS, &r, depth);
             hits[i] = h;
             shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
                       write_aov);
         }
     }
 }
+
+#if TRACE_COOP
+__kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void
+render_shadow_trace_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                         __global const Light* restrict lights,
+                         __global const uint* restrict counts, const uint depth,
+                         __global const Ray* restrict shadow_rays,
+                         __global const Hit* restrict shadow_hits,
+                         __global float4* restrict shadow_radiance,
+                         __global const float4* restrict caustic_map, const CausticParams cprm,
+                         __global const Ray* restrict rays, __global Hit* restrict hits,
+                         const uint coop_shadow)
+{
+    __local TraceCoop coop;
+    const uint n_shadow = counts[depth - 1u], n = counts[depth];
+    if (coop_shadow) {
+        for (uint j = get_group_id(0); j < n_shadow; j += get_num_groups(0))
+            shadow_ray(TRACE_COOP_ARGS(&coop), RENDER_GEOM_ARGS, prm, lights, shadow_rays,
+                       shadow_hits, j, shadow_radiance, caustic_map, &cprm);
+    } else {
+        for (uint j = get_global_id(0); j < n_shadow; j += get_global_size(0))
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays,
+                       shadow_hits, j, shadow_radiance, caustic_map, &cprm);
+    }
+    for (uint i = get_group_id(0); i < n; i += get_num_groups(0)) {
+        const Ray r = rays[i];
+        const Hit h = trace_ray(TRACE_COOP_ARGS(&coop), &r, depth);
+        if (get_local_id(0) == 0) hits[i] = h;
+    }
+}
+
+__kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void
+render_shadow_trace_shade_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS,
+                               __constant const RenderParams* prm,
+                               __global const Light* restrict lights,
+                               __global const uint* restrict counts, const uint depth,
+                               __global const Ray* restrict shadow_rays,
+                               __global const Hit* restrict shadow_hits,
+                               __global float4* restrict shadow_radiance,
+                               __global const float4* restrict caustic_map,
+                               const CausticParams cprm, __constant const Camera* cam,
+                               __global const Ray* restrict rays, __global Hit* restrict hits,
+                               __global float4* restrict radiance,
+                               __global uint* restrict child_counts, __global Aov* restrict aov,
+                               const uint write_aov, const uint coop_shadow)
+{
+    __local TraceCoop coop;
+    const uint n_shadow = counts[depth - 1u], n = counts[depth];
+    if (coop_shadow) {
+        for (uint j = get_group_id(0); j < n_shadow; j += get_num_groups(0))
+            shadow_ray(TRACE_COOP_ARGS(&coop), RENDER_GEOM_ARGS, prm, lights, shadow_rays,
+                       shadow_hits, j, shadow_radiance, caustic_map, &cprm);
+    } else {
+        for (uint j = get_global_id(0); j < n_shadow; j += get_global_size(0))
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays,
+                       shadow_hits, j, shadow_radiance, caustic_map, &cprm);
+    }
+    for (uint i = get_group_id(0); i < n; i += get_num_groups(0)) {
+        const Ray r = rays[i];
+        const Hit h = trace_ray(TRACE_COOP_ARGS(&coop), &r, depth);
+        if (get_local_id(0) == 0) {
+            hits[i] = h;
+            shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
+                      write_aov);
+        }
+    }
+}
+#endif

@@ -5,15 +5,16 @@
 #define LBWATER_RENDER_TRACE_H
 
 #include "render_types.h"
-#include "traverse.h"
+#include "traverse_coop.h"
 
-inline Hit trace_ray(SCENE_PARAMS, const Ray* r, uint depth)
+/* TRACE_PARAMS: per work-item, or per work-group with coop_on (traverse_coop.h) */
+inline Hit trace_ray(TRACE_PARAMS, const Ray* r, uint depth)
 {
     Hit h = {INFINITY, 0.0f, 0.0f, -1, -1};
     if (r->wr + r->wg + r->wb > 0.0f)   /* dead padding rays have zero weight */
-        h = scene_closest_hit_masked(SCENE_ARGS, (float3)(r->ox, r->oy, r->oz),
-                                     (float3)(r->dx, r->dy, r->dz), 0.0f, INFINITY, ~0u,
-                                     depth ? TRACE_KIND_SECONDARY : TRACE_KIND_PRIMARY);
+        h = trace_closest_masked(TRACE_ARGS, (float3)(r->ox, r->oy, r->oz),
+                                 (float3)(r->dx, r->dy, r->dz), 0.0f, INFINITY, ~0u,
+                                 depth ? TRACE_KIND_SECONDARY : TRACE_KIND_PRIMARY);
     return h;
 }
 

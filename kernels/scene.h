@@ -15,6 +15,7 @@
    blas_tris  : every mesh's triangles in one array, in leaf order (wide: in blocks);
    trace_stats: [0] counts traversal-stack overflows (never expected: the stack is deeper than
                 any tree the builder can make; a non-zero count means hits may be missing);
+                [1] counts cooperative walks redone serially (TRACE_STAT_COOP_REDO);
                 the work counters of TRACE_COUNT builds follow (TRACE_STAT_COUNT). */
 /* TRACE_WIDE picks the BLAS layout the kernels read; the host passes it (kernels.runtime adds
    the runtime's layout to every build, raytrace.scene.Scene.trace_defines names the scene's):
@@ -40,6 +41,9 @@
 #define SCENE_ARGS tlas_info, tlas_nodes, tlas_prims, instances, blas_nodes, blas_tris, trace_stats
 
 #define TRACE_STAT_OVERFLOW 0
+/* rays of the cooperative walk (traverse_coop.h) traced again serially because its local stack
+   was full: never wrong, only slower */
+#define TRACE_STAT_COOP_REDO 1
 /* Traversal work counters, written only by TRACE_COUNT=1 builds (a debug define, traverse.h;
    raytrace.scene.Scene.trace_counts reads them): per ray kind, TRACE_COUNT_FIELDS uint sums
    from TRACE_STAT_COUNT, then per kind the BLAS nodes visited per instance (ids above

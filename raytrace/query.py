@@ -15,6 +15,11 @@ from kernels.runtime import Runtime, get_runtime
 from raytrace.bvh import HIT_DTYPE
 from raytrace.scene import MASK_ALL, Scene
 
+#: Work-items per ray of the cooperative walk (kernels/traverse_coop.h TRACE_COOP_WIDTH) and the
+#: most work-groups a cooperative launch uses (a grid stride covers the rest).
+COOP_WIDTH = 32
+COOP_MAX_GROUPS = 8192
+
 
 def pack_rays(origins, directions, tmin=0.0, tmax=np.inf) -> tuple[np.ndarray, np.ndarray]:
     """(n,4) float32 origin|tmin and direction|tmax arrays, validated; one-line ValueErrors."""
@@ -54,14 +59,16 @@ class RayQuery:
 
     def __init__(self, scene: Scene, org: cl.Buffer, dirs: cl.Buffer, hits: cl.Buffer, n: int,
                  *, any_hit: bool = False, stage: str = "trace", defines: dict | None = None,
-                 mask: int = MASK_ALL):
+                 mask: int = MASK_ALL, coop: bool = False):
         """``defines``: extra build defines of ``trace_query.cl`` (e.g. ``{"TRACE_CPU": 0}``
         to time the GPU flavour of the traversal on a CPU; see kernels/traverse.h). ``mask``:
         the rays see the instances whose visibility mask shares a bit with it
-        (Scene.set_instance_mask)."""
-        self.rt, self.n, self.stage = scene.rt, int(n), stage
-        name = "trace_any" if any_hit else "trace_closest"
-        defines = {**scene.trace_defines, **(defines or {})}
+        (Scene.set_instance_mask). ``coop``: one ray per work-group of 32 tracing it together
+        (kernels/traverse_coop.h; binary layout, else each work-item alone)."""
+        self.rt, self.n, self.stage, self.coop = scene.rt, int(n), stage, bool(coop)
+        name = ("trace_any" if any_hit else "trace_closest") + ("_coop" if coop else "")
+        defines = {**scene.trace_defines, **({"TRACE_COOP": 1} if coop else {}),
+                   **(defines or {})}
         self._k = scene.rt.kernel_launcher("trace_query.cl", name, stage=stage, defines=defines)
         self._k.bind(**scene.trace_bindings(), n=self.n, org=org, dir=dirs, hits=hits,
                      mask=int(mask))
@@ -73,6 +80,8 @@ class RayQuery:
         self._k.bind(**self._scene.trace_bindings())
 
     def enqueue(self, local_size: int | None = 64) -> cl.Event:
+        if self.coop:   # a work-group of COOP_WIDTH per ray, at most COOP_MAX_GROUPS
+            return self._k.launch(COOP_WIDTH * max(1, min(self.n, COOP_MAX_GROUPS)), COOP_WIDTH)
         return self._k.launch(self.n, local_size)
 
 

@@ -33,6 +33,16 @@ to overlap only the tail levels of few rays. The levels' hits live in two buffer
 radiance too; unfused, level d + 1's shade runs after level d's accumulation on the in-order
 queue and one radiance buffer serves.
 
+``coop_from`` D (None: off) traverses the trace and shadow rays of the levels from D on one per
+work-group of 32 (``kernels/traverse_coop.h``, the ``*_coop`` kernels of a ``TRACE_COOP=1``
+build, launched for about one group per ray): the tail levels (1080p on the H200: 36k, 12k, 4k,
+0.9k rays at depths 2-5) are latency-bound, each launch about one ray's chain of ~200-300
+dependent node reads (0.16 ms for 884 rays), and 32 work-items popping 32 nodes a round shorten
+that chain. Either order; level d - 1's shadow rays in the combined launch stay one per
+work-item when d - 1 < D. The image is the per-work-item one except where two triangles are hit
+at exactly the same distance (the walk then keeps the smallest instance and triangle ids), and
+for one ``coop_from`` the same bytes in either order.
+
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
 the shading), either order. Every kernel (``kernels.launch.Kernel``) belongs to this renderer
 (one per depth level; the tonemap pass and the scatter alone have their own gather objects) and
@@ -63,6 +73,7 @@ from kernels.pinned import PinnedRing, ReadHandle
 from kernels.runtime import Runtime
 from raytrace.bvh import HIT_DTYPE
 from raytrace.caustics import CAUSTIC_PARAMS
+from raytrace.query import COOP_MAX_GROUPS, COOP_WIDTH
 from raytrace.render_scene import RenderScene
 from raytrace.render_types import (
     AOV,
@@ -115,6 +126,9 @@ class RenderSettings:
                                   #: go with level d + 1's trace (the levels before: alone;
                                   #: level 0's 2M shadow rays with level 1's trace were slower
                                   #: on the H200 than apart: BENCHMARKS.md)
+    coop_from: int | None = None  #: the first level d whose trace and shadow rays are traversed
+                                  #: one per work-group of 32 (kernels/traverse_coop.h: the
+                                  #: latency-bound tail levels of few rays); None: never
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -123,6 +137,10 @@ class RenderSettings:
             v = getattr(self, name)
             if not isinstance(v, int | np.integer) or not lo <= v <= hi:
                 raise ValueError(f"render {name} must be an integer in [{lo}, {hi}], got {v!r}")
+        c = self.coop_from
+        if c is not None and (not isinstance(c, int | np.integer) or not 0 <= c <= MAX_DEPTH):
+            raise ValueError(f"render coop_from must be None or an integer in [0, {MAX_DEPTH}], "
+                             f"got {c!r}")
         if not (math.isfinite(self.exposure) and self.exposure > 0):
             raise ValueError(f"render exposure must be > 0, got {self.exposure}")
         if not 0 <= self.min_weight < 1:
@@ -335,6 +353,17 @@ class Renderer:
         self._level_buffers()
         self._bound_sig = None  # rebind: the kernels of the new order, to these buffers
 
+    def set_coop(self, first: int | None) -> None:
+        """Traverse the trace and shadow rays of levels ``first`` and deeper one per
+        work-group (``coop_from``; None: none) from the next frame on; an A/B switch (bench
+        frame --coop-from). The image differs only where two triangles are hit at exactly the
+        same distance (kernels/traverse_coop.h)."""
+        new = dataclasses.replace(self.settings, coop_from=first).resolved()
+        if new == self.settings:
+            return
+        self.settings = new
+        self._bound_sig = None  # rebind: the cooperative kernels of these levels
+
     def set_stage_per_depth(self, on: bool = True) -> None:
         """Time each depth level's trace, shade, shadow, scan and gather under its own stage
         (``render.shadow.d3``), e.g. to see the tail levels of few rays (bench frame
@@ -370,7 +399,8 @@ class Renderer:
                 "scatter": launcher("render_frame.cl", "render_gather", "render.gather")}
             self._k.append(ks)
             self._bound_sig = None
-        if self.settings.overlap_levels:   # level d's shadow rays with level d + 1's trace
+        s = self.settings
+        if s.overlap_levels:   # level d's shadow rays with level d + 1's trace
             for d, ks in enumerate(self._k[1:], 1):
                 if "shadow_trace" not in ks:
                     ks["shadow_trace"] = rt.kernel_launcher(
@@ -380,6 +410,21 @@ class Renderer:
                         "render_shadow_trace.cl", "render_shadow_trace_shade",
                         stage=self._stage_name("render.shadow_trace", d))
                     self._bound_sig = None
+        if s.coop_from is not None:   # the cooperative flavours of the levels from coop_from
+            coop = {"TRACE_COOP": 1}
+            for d, ks in enumerate(self._k[s.coop_from:], s.coop_from):
+                names = [("trace", "render_trace.cl", "render_trace"),
+                         ("trace_shade", "render_trace.cl", "render_trace_shade"),
+                         ("shadow", "render_shade.cl", "render_shadow")]
+                if d > 0 and s.overlap_levels:
+                    names += [("shadow_trace", "render_shadow_trace.cl", "render_shadow_trace"),
+                              ("shadow_trace_shade", "render_shadow_trace.cl",
+                               "render_shadow_trace_shade")]
+                for key, source, name in names:
+                    if key + "_coop" not in ks:
+                        ks[key + "_coop"] = rt.kernel_launcher(
+                            source, name + "_coop", stage=ks[key].stage, defines=coop)
+                        self._bound_sig = None
         return self._k[depth]
 
     def _bind(self, levels: int) -> None:
@@ -420,6 +465,19 @@ class Renderer:
                 k["shadow_trace"].bind(**scene, **shading, **light, **last, **wave, hits=hits)
                 k["shadow_trace_shade"].bind(**scene, **shading, **light, **last,
                                              cam=self.camera_buf, **wave, hits=hits, **out)
+            if "trace_coop" in k:   # the cooperative flavours: the same arguments
+                k["trace_coop"].bind(**scene, **wave, hits=hits)
+                k["trace_shade_coop"].bind(**scene, **shading, cam=self.camera_buf, **wave,
+                                           hits=hits, **out)
+                k["shadow_coop"].bind(**scene, **shading, **light, **wave, hits=hits,
+                                      radiance=radiance)
+            if "shadow_trace_coop" in k:
+                both = int(s.coop_from is not None and d - 1 >= s.coop_from)
+                k["shadow_trace_coop"].bind(**scene, **shading, **light, **last, **wave,
+                                            hits=hits, coop_shadow=both)
+                k["shadow_trace_shade_coop"].bind(**scene, **shading, **light, **last,
+                                                  cam=self.camera_buf, **wave, hits=hits,
+                                                  **out, coop_shadow=both)
             k["scan"].bind(child_counts=self.child, counts=self.counts, depth=d,
                            capacity=self.capacity, block_sums=self.block_sums,
                            ticket=self.ticket, stats=self.stats)
@@ -507,7 +565,7 @@ class Renderer:
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
         sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
-               s.overlap_levels, s.overlap_from, self._bind_version)
+               s.overlap_levels, s.overlap_from, s.coop_from, self._bind_version)
         ops = self._plans.get(key)
         if ops is None:
             if len(self._plans) >= 16:
@@ -545,6 +603,18 @@ class Renderer:
         def overlapped(d: int) -> bool:   # level d's shadow rays go with level d + 1's trace
             return s.overlap_levels and s.overlap_from <= d < deepest
 
+        def coop(d: int) -> bool:   # level d's rays are traversed one per work-group
+            return s.coop_from is not None and d >= s.coop_from
+
+        def coop_size(n: int) -> tuple:   # a work-group per ray of about n, at most so many
+            return (COOP_WIDTH * max(1, min(n, COOP_MAX_GROUPS)),)
+
+        def per_ray(k: dict, name: str, d: int, size: tuple) -> None:  # either flavour
+            if coop(d):
+                launch(k[name + "_coop"], coop_size(size[0]), (COOP_WIDTH,))
+            else:
+                launch(k[name], size, ls)
+
         for (rp, (g_both, g_accumulate, g_finish, g_scatter), raygen_size, _), sz in zip(
                 self._plan, sizes, strict=True):
             bind(self.k_raygen, rp=rp)
@@ -553,14 +623,14 @@ class Renderer:
                 k = ks[depth]
                 ray_size, scan_size, scatter_size, pixel_size = sz[depth]
                 if depth == 0 or not overlapped(depth - 1):  # else traced with the last
-                    launch(k[trace], ray_size, ls)
+                    per_ray(k, trace, depth, ray_size)
                     if depth == 0 and rp["zero_stats"]:
                         ops.append((self._FLUSH,))  # the device starts while the rest is queued
                     if not s.fuse_trace_shade:
                         launch(k["shade"], ray_size, ls)
                 if not overlapped(depth):
                     if has_lights:
-                        launch(k["shadow"], ray_size, ls)
+                        per_ray(k, "shadow", depth, ray_size)
                     if depth < deepest:
                         launch(k["scan"], scan_size, scan_ls)
                         bind(k["gather"], gp=g_both)
@@ -578,10 +648,17 @@ class Renderer:
                 launch(k["scan"], scan_size, scan_ls)
                 bind(k["scatter"], gp=g_scatter)
                 launch(k["scatter"], scatter_size, ls)
-                if has_lights:
+                if has_lights and coop(depth + 1):
+                    # a group per ray of level d + 1 (and of level d's shadow rays if coop(d),
+                    # else a work-item per shadow ray: the serial part runs first)
+                    groups = coop_size(max(next_size[0], ray_size[0] * coop(depth)))
+                    serial = 0 if coop(depth) else -(-ray_size[0] // COOP_WIDTH) * COOP_WIDTH
+                    launch(nxt["shadow_" + trace + "_coop"], (max(groups[0], serial),),
+                           (COOP_WIDTH,))
+                elif has_lights:
                     launch(nxt["shadow_" + trace], (ray_size[0] + next_size[0],), ls)
                 else:
-                    launch(nxt[trace], next_size, ls)
+                    per_ray(nxt, trace, depth + 1, next_size)
                 bind(k["gather"], gp=g_accumulate)
                 launch(k["gather"], scatter_size, ls)
                 if not s.fuse_trace_shade:
@@ -611,7 +688,8 @@ class Renderer:
                 old[2] == self._bind_version:
             return
         for k in self._k:
-            for name in ("shadow", "shadow_trace", "shadow_trace_shade"):
+            for name in ("shadow", "shadow_trace", "shadow_trace_shade", "shadow_coop",
+                         "shadow_trace_coop", "shadow_trace_shade_coop"):
                 if name in k:
                     k[name].bind(caustic_map=cmap, cprm=self.caustic_params)
         self._caustic_bound = (cmap, cprm, self._bind_version)

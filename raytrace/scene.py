@@ -39,6 +39,8 @@ TLAS_LEAF_SIZE = 1
 #: An instance's default visibility mask (kernels/bvh.h Instance.mask): every ray sees it.
 MASK_ALL = 0xFFFFFFFF
 TRACE_STAT_OVERFLOW = 0
+#: Rays of the cooperative walk redone serially, its stack full (kernels/traverse_coop.h).
+TRACE_STAT_COOP_REDO = 1
 #: The traversal work counters of TRACE_COUNT builds (kernels/scene.h): ray kinds and fields.
 TRACE_KINDS = ("query", "primary", "secondary", "shadow", "photon", "crossing")
 TRACE_COUNT_FIELDS = ("rays", "traversals", "tlas_nodes", "blas_entries", "blas_nodes",
@@ -428,6 +430,11 @@ class Scene:
                 "tlas_prims": self.tlas_prims, "instances": self.instances,
                 "blas_nodes": self._trace_blas[0], "blas_tris": self._trace_blas[1],
                 "trace_stats": self.trace_stats}
+
+    def coop_redos(self) -> int:
+        """Cooperative walks (kernels/traverse_coop.h) traced again serially because their local
+        stack was full, since the scene was made: correct hits, only slower. Synchronises."""
+        return int(self.rt.to_host(self.trace_stats, np.int32, 1, TRACE_STAT_COOP_REDO)[0])
 
     def check(self) -> dict:
         """Read the device's guards (synchronises): raise ValueError on non-finite vertices or a

@@ -76,3 +76,15 @@ def test_bench_frame_overlap_from_out_of_range_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "--overlap-from 99 is out of range; allowed [0, 32]" in err
     assert "\n" not in err
+
+
+def test_bench_frame_coop_from_is_recorded_and_checked(tmp_path, capsys):
+    out = tmp_path / "res"
+    assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
+                 "--warmup", "1", "--frame-time", "0.1", "--caustics", "off", "--coop-from", "4",
+                 "--out", str(out)]) == 0
+    r = json.loads((out / "bench_frame.json").read_text())[0]
+    assert r["coop_from"] == 4 and r["fps"] > 0
+    assert main(["bench", "frame", "--coop-from", "-1", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--coop-from -1 is out of range; allowed [0, 32]" in err and "\n" not in err

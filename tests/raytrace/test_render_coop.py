@@ -1,0 +1,77 @@
+"""RenderSettings.coop_from (the trace and shadow rays of the deeper levels traversed one per
+work-group, kernels/traverse_coop.h) gives the image of the per-work-item walk (a tie of two
+triangles at one distance may pick the other: within one level of 255) and, for one coop_from,
+the same bytes whatever the order of the levels (overlap_levels), fused or not, over chunks."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from raytrace.render import RenderSettings
+from tests.raytrace.test_render_overlap import frame, glass_without_lights, stages
+from tests.raytrace.test_render_plans import build
+from tests.raytrace.test_trace_coop import binary_rt  # noqa: F401  (fixture)
+
+
+def close(a, b):
+    """Within one RGBA level on at least 99.9% of the pixels."""
+    near = (np.abs(a.astype(int) - b.astype(int)) <= 1).all(-1)
+    return near.mean() >= 0.999
+
+
+@pytest.mark.parametrize("coop_from,fused,lights,chunk", [(1, False, True, None),
+                                                          (2, True, True, 128),
+                                                          (2, False, True, None),
+                                                          (1, False, False, 128)])
+def test_coop_levels_give_the_serial_image(binary_rt, coop_from, fused, lights, chunk):  # noqa: F811
+    rt = binary_rt
+    s = RenderSettings(width=20, height=14, bounces=3, spp=4, fuse_trace_shade=fused,
+                       max_chunk_rays=chunk)
+    # build(rt, 3) would add a box whose face is coplanar with the glass box's: hits there tie
+    # (the same t on two instances; measured), and the two walks may pick either
+    scene = build(rt, 2) if lights else glass_without_lights(rt)
+    _, want, _, st = frame(rt, scene, s)
+    assert st["rays_per_depth"][3] > 0 and want[..., :3].std() > 5
+    c = dataclasses.replace(s, coop_from=coop_from)
+    r_on, on, fb_on, st_on = frame(rt, scene, c)
+    r_off, off, fb_off, st_off = frame(rt, scene, dataclasses.replace(c, overlap_levels=False))
+    assert close(on, want) and st_on == st
+    assert np.array_equal(on, off) and np.array_equal(fb_on, fb_off) and st_on == st_off
+    assert scene.scene.coop_redos() == 0
+    # the cooperative kernels ran (local size 32) for the levels from coop_from, and only there
+    for r in (r_on, r_off):
+        coop = [op for op in r._last_ops if op[0] == r._LAUNCH and op[1].function_name.endswith(
+            "_coop")]
+        assert coop and all(op[3] == (32,) for op in coop)
+        n_chunks = len(r.chunks)
+        assert len(coop) >= n_chunks * (4 - coop_from)
+
+
+def test_set_coop_switches_and_validates(binary_rt):  # noqa: F811
+    rt = binary_rt
+    s = RenderSettings(width=16, height=12, bounces=2)
+    scene = build(rt, 2)
+    _, want, *_ = frame(rt, scene, s)
+    r, *_ = frame(rt, scene, s)
+    for first in (0, 2, None, 1):
+        r.set_coop(first)
+        got = r.render()
+        assert close(got, want), first
+        names = [op[1].function_name for op in r._last_ops if op[0] == r._LAUNCH]
+        assert any(n.endswith("_coop") for n in names) == (first is not None)
+    assert "render.shadow_trace" in stages(r)
+    for bad in (-1, 99, 1.5):
+        with pytest.raises(ValueError, match="coop_from must be None or an integer"):
+            r.set_coop(bad)
+
+
+def test_coplanar_ties_differ_only_in_the_triangle(binary_rt):  # noqa: F811
+    """build(rt, 3): two boxes share a face; the same distance either way, the same bytes
+    whatever the order of the levels."""
+    rt = binary_rt
+    s = RenderSettings(width=20, height=14, bounces=3, spp=4, coop_from=1)
+    scene = build(rt, 3)
+    _, on, fb_on, st_on = frame(rt, scene, s)
+    _, off, fb_off, st_off = frame(rt, scene, dataclasses.replace(s, overlap_levels=False))
+    assert np.array_equal(on, off) and np.array_equal(fb_on, fb_off) and st_on == st_off
