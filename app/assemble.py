@@ -263,8 +263,9 @@ def caustic_settings(scene: Scene, mode: str | None = None):
 
 
 def render_settings(scene: Scene, *, width=None, height=None, spp=None, bounces=None,
-                    aov=False, seed=None):
-    """The renderer's settings from ``[render]`` and ``[shading]``, with overrides."""
+                    aov=False, seed=None, coop_from=None):
+    """The renderer's settings from ``[render]`` and ``[shading]``, with overrides;
+    ``coop_from``: the device's choice (raytrace.render.device_coop_from)."""
     from raytrace.render import RenderSettings
 
     r, sh = scene.render, scene.shading
@@ -277,4 +278,4 @@ def render_settings(scene: Scene, *, width=None, height=None, spp=None, bounces=
         tonemap=sh.tonemap if sh else "aces",
         exposure=sh.exposure if sh else 1.0,
         min_weight=sh.min_contribution if sh else 1e-3,
-        seed=(seed if seed is not None else sh.seed if sh else 0))
+        seed=(seed if seed is not None else sh.seed if sh else 0), coop_from=coop_from)

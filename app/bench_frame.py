@@ -50,10 +50,11 @@ def add_arguments(p) -> None:
     p.add_argument("--overlap-from", type=int, default=None, metavar="D",
                    help="overlap only the levels from depth D on (default: "
                         "RenderSettings.overlap_from, 1)")
-    p.add_argument("--coop-from", type=int, default=None, metavar="D",
+    p.add_argument("--coop-from", default=None, metavar="D|off",
                    help="traverse the trace and shadow rays of depth D on one per work-group of "
-                        "32 (RenderSettings.coop_from: the latency-bound tail levels; default: "
-                        "none, one ray per work-item)")
+                        "32 (RenderSettings.coop_from: the latency-bound tail levels); off: one "
+                        "ray per work-item everywhere; default: the device's choice (2 on a "
+                        "GPU, off on a CPU)")
     p.add_argument("--host-copy", action="store_true",
                    help="copy each image out of the pinned read-back array and check its pixels "
                         "inside the timed loop (the cost a read_frame() caller adds)")
@@ -113,9 +114,16 @@ def run(args) -> int:
     overlap_from = getattr(args, "overlap_from", None)
     if overlap_from is not None and not 0 <= overlap_from <= MAX_DEPTH:
         raise InputError(f"--overlap-from {overlap_from} is out of range; allowed [0, {MAX_DEPTH}]")
-    coop_from = getattr(args, "coop_from", None)
-    if coop_from is not None and not 0 <= coop_from <= MAX_DEPTH:
-        raise InputError(f"--coop-from {coop_from} is out of range; allowed [0, {MAX_DEPTH}]")
+    coop_arg = getattr(args, "coop_from", None)
+    coop_from = None if coop_arg in (None, "off") else coop_arg
+    if coop_from is not None:
+        try:
+            coop_from = int(coop_from)
+        except ValueError:
+            coop_from = -1
+        if not 0 <= coop_from <= MAX_DEPTH:
+            raise InputError(f"--coop-from {coop_arg} is out of range; allowed off or "
+                             f"[0, {MAX_DEPTH}]")
     rt = get_runtime(args.device)
     rows = []
     for cells in args.cells:
@@ -124,7 +132,8 @@ def run(args) -> int:
         if getattr(args, "per_depth", False):
             world.renderer.set_stage_per_depth(True)
         world.renderer.set_overlap(not getattr(args, "no_overlap", False), overlap_from)
-        world.renderer.set_coop(coop_from)
+        if coop_arg is not None:
+            world.renderer.set_coop(coop_from)
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image

@@ -28,8 +28,8 @@
    TRACE_STAT_COOP_REDO.
 
    Compiled in only with TRACE_COOP=1 and the binary layout without the TRACE_COUNT counters:
-   under TRACE_WIDE or TRACE_COUNT, trace_scene_coop is the serial walk per work-item (the same
-   hit; TRACE_COUNT counts each ray once, by the first work-item). */
+   under TRACE_WIDE, TRACE_COUNT or TRACE_COOP_SERIAL, trace_scene_coop is the serial walk per
+   work-item (the same hit; TRACE_COUNT counts each ray once, by the first work-item). */
 #ifndef LBWATER_TRAVERSE_COOP_H
 #define LBWATER_TRAVERSE_COOP_H
 
@@ -42,7 +42,14 @@
 #ifndef TRACE_COOP_STACK /* entries; a define so tests can force the overflow fallback */
 #define TRACE_COOP_STACK 512
 #endif
-#define TRACE_COOP_WALK (TRACE_COOP && !TRACE_WIDE && !TRACE_COUNT)
+/* TRACE_COOP_SERIAL=1: the cooperative kernels with the serial walk per work-item (the same hits;
+   raytrace.render.Renderer sets it on a CPU, where PoCL takes minutes to compile the walk's
+   barriers inside the renderer's light and crossing loops; the walk itself is tested there
+   through trace_query.cl). */
+#ifndef TRACE_COOP_SERIAL
+#define TRACE_COOP_SERIAL 0
+#endif
+#define TRACE_COOP_WALK (TRACE_COOP && !TRACE_WIDE && !TRACE_COUNT && !TRACE_COOP_SERIAL)
 #define TRACE_COOP_FOUND 1 /* any-hit: a hit was found */
 #define TRACE_COOP_FULL 2  /* the stack overflowed: redo serially */
 
@@ -257,6 +264,17 @@ TRACE_INLINE bool trace_scene_coop(SCENE_PARAMS, __local TraceCoop* coop, float3
 #endif
 }
 #endif
+
+/* trace_scene for the per-ray bodies (TRACE_PARAMS): per work-item, or per work-group when
+   coop_on in a TRACE_COOP build. Closest hit or (any) the first found, in *hit. */
+TRACE_INLINE bool trace_masked(TRACE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
+                               bool any, uint mask, Hit* hit, int kind) {
+#if TRACE_COOP
+    if (coop_on) return trace_scene_coop(SCENE_ARGS, coop, org, dir, tmin, tmax, any, mask, hit,
+                                         kind);
+#endif
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, kind);
+}
 
 /* scene_closest_hit_masked / scene_any_hit_masked for the per-ray bodies (TRACE_PARAMS):
    per work-item, or per work-group when coop_on in a TRACE_COOP build. */

@@ -169,6 +169,18 @@ def bytes_per_ray_slot(settings: RenderSettings) -> int:
     return BYTES_PER_RAY_SLOT + s.overlap_levels * (HIT_DTYPE.itemsize + 16 * s.fuse_trace_shade)
 
 
+#: ``coop_from`` on a GPU (binary BVH layout): from depth 2 on, the tail levels of a few
+#: thousand rays or fewer (BENCHMARKS.md, "third session": 1 is 8x slower, 3 a little slower).
+GPU_COOP_FROM = 2
+
+
+def device_coop_from(rt: Runtime) -> int | None:
+    """The ``coop_from`` a frame uses on ``rt``'s device: :data:`GPU_COOP_FROM` on a GPU with the
+    binary BVH layout; None elsewhere (a CPU runs one work-item per core: a 32-wide group
+    would trace each ray 32 times over)."""
+    return GPU_COOP_FROM if rt.is_gpu and rt.bvh_layout == "binary" else None
+
+
 def jitter_cols(spp: int) -> int:
     """Columns of the jittered grid: the largest divisor of spp not above sqrt(spp)."""
     return max(c for c in range(1, math.isqrt(spp) + 1) if spp % c == 0)
@@ -411,7 +423,9 @@ class Renderer:
                         stage=self._stage_name("render.shadow_trace", d))
                     self._bound_sig = None
         if s.coop_from is not None:   # the cooperative flavours of the levels from coop_from
-            coop = {"TRACE_COOP": 1}
+            # on a CPU the serial walk per work-item (kernels/traverse_coop.h TRACE_COOP_SERIAL:
+            # PoCL compiles the walk inside these kernels for minutes; the hits are the same)
+            coop = {"TRACE_COOP": 1, "TRACE_COOP_SERIAL": int(not rt.is_gpu)}
             for d, ks in enumerate(self._k[s.coop_from:], s.coop_from):
                 names = [("trace", "render_trace.cl", "render_trace"),
                          ("trace_shade", "render_trace.cl", "render_trace_shade"),

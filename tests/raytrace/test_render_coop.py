@@ -75,3 +75,18 @@ def test_coplanar_ties_differ_only_in_the_triangle(binary_rt):  # noqa: F811
     _, on, fb_on, st_on = frame(rt, scene, s)
     _, off, fb_off, st_off = frame(rt, scene, dataclasses.replace(s, overlap_levels=False))
     assert np.array_equal(on, off) and np.array_equal(fb_on, fb_off) and st_on == st_off
+
+
+def test_the_device_choice_is_cooperative_only_on_a_gpu_with_the_binary_layout(rt):
+    """A frame's coop_from (raytrace.render.device_coop_from): GPU_COOP_FROM on a GPU with the
+    binary BVH layout, off on a CPU (a 32-wide group would trace each ray 32 times over)."""
+    import types
+
+    from raytrace.render import GPU_COOP_FROM, device_coop_from
+
+    gpu = types.SimpleNamespace(is_gpu=True, bvh_layout="binary")
+    assert device_coop_from(gpu) == GPU_COOP_FROM == 2
+    assert device_coop_from(types.SimpleNamespace(is_gpu=True, bvh_layout="wide")) is None
+    assert device_coop_from(types.SimpleNamespace(is_gpu=False, bvh_layout="binary")) is None
+    assert device_coop_from(rt) == (GPU_COOP_FROM if rt.is_gpu and rt.bvh_layout == "binary"
+                                    else None)
