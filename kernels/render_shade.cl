@@ -44,8 +44,9 @@ __kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void rend
 {
     __local TraceCoop coop;
     const uint n = counts[depth];
-    for (uint i = get_group_id(0); i < n; i += get_num_groups(0))
-        shadow_ray(TRACE_COOP_ARGS(&coop), RENDER_GEOM_ARGS, prm, lights, rays, hits, i,
+    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
+    TRACE_COOP_FOR(i, n, on)
+        shadow_ray(TRACE_COOP_IF_ARGS(&coop, on), RENDER_GEOM_ARGS, prm, lights, rays, hits, i,
                    radiance, caustic_map, &cprm);
 }
 #endif

@@ -25,23 +25,17 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS,
                                    __constant const RenderParams* prm, float3 org, float3 dir,
                                    float tmax, int medium)
 {
-    /* one traversal call site for the any-hit query and the crossings (k = -1: the any-hit):
-     * each inlined traversal costs code, registers and, on PoCL, compile time */
+    /* one any-hit call site for both cases (one traversal less inlined) */
     const uint opaque = prm->transmissive_shadows ? RENDER_MASK_OPAQUE : ~0u;
-    const int crossings = prm->transmissive_shadows ? RENDER_MAX_SHADOW_CROSSINGS : 0;
+    if (trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))
+        return (float3)(0.0f);
+    if (!prm->transmissive_shadows) return (float3)(1.0f);
     float3 T = (float3)(1.0f);
-    for (int k = -1; k < crossings; k++) {
-        const bool any = k < 0;
-        Hit h;
-        const bool got = trace_masked(TRACE_ARGS, org, dir, 0.0f, tmax, any,
-                                      any ? opaque : RENDER_MASK_TRANSMISSIVE, &h,
-                                      any ? TRACE_KIND_SHADOW
-                                          : (TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0)));
-        if (any) {
-            if (got) return (float3)(0.0f);
-            continue;
-        }
-        if (!got) {
+    for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
+        const Hit h = trace_closest_masked(TRACE_ARGS, org, dir, 0.0f, tmax,
+                                           RENDER_MASK_TRANSMISSIVE,
+                                           TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
+        if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;
         }
@@ -58,8 +52,7 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS,
         org = offset_ray(s.p, -nf_g);
         tmax -= h.t;
     }
-    /* opaque scenes: the any-hit found nothing; with dielectrics: too many crossings */
-    return prm->transmissive_shadows ? (float3)(0.0f) : (float3)(1.0f);
+    return (float3)(0.0f);
 }
 
 /* With coop_on, the whole work-group runs it for ray i alike; one work-item adds the light. */

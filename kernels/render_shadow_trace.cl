@@ -87,19 +87,16 @@ render_shadow_trace_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Rend
 {
     __local TraceCoop coop;
     const uint n_shadow = counts[depth - 1u], n = counts[depth];
-    if (coop_shadow) {
-        for (uint j = get_group_id(0); j < n_shadow; j += get_num_groups(0))
-            shadow_ray(TRACE_COOP_ARGS(&coop), RENDER_GEOM_ARGS, prm, lights, shadow_rays,
-                       shadow_hits, j, shadow_radiance, caustic_map, &cprm);
-    } else {
-        for (uint j = get_global_id(0); j < n_shadow; j += get_global_size(0))
-            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays,
-                       shadow_hits, j, shadow_radiance, caustic_map, &cprm);
-    }
-    for (uint i = get_group_id(0); i < n; i += get_num_groups(0)) {
+    /* uniform: a group per ray while few (level depth - 1's only from coop_from on) */
+    const bool on_shadow = coop_shadow && n_shadow <= TRACE_COOP_MAX_RAYS;
+    const bool on = n <= TRACE_COOP_MAX_RAYS;
+    TRACE_COOP_FOR(j, n_shadow, on_shadow)
+        shadow_ray(TRACE_COOP_IF_ARGS(&coop, on_shadow), RENDER_GEOM_ARGS, prm, lights,
+                   shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm);
+    TRACE_COOP_FOR(i, n, on) {
         const Ray r = rays[i];
-        const Hit h = trace_ray(TRACE_COOP_ARGS(&coop), &r, depth);
-        if (get_local_id(0) == 0) hits[i] = h;
+        const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);
+        if (!on || get_local_id(0) == 0) hits[i] = h;
     }
 }
 
@@ -120,19 +117,16 @@ render_shadow_trace_shade_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS,
 {
     __local TraceCoop coop;
     const uint n_shadow = counts[depth - 1u], n = counts[depth];
-    if (coop_shadow) {
-        for (uint j = get_group_id(0); j < n_shadow; j += get_num_groups(0))
-            shadow_ray(TRACE_COOP_ARGS(&coop), RENDER_GEOM_ARGS, prm, lights, shadow_rays,
-                       shadow_hits, j, shadow_radiance, caustic_map, &cprm);
-    } else {
-        for (uint j = get_global_id(0); j < n_shadow; j += get_global_size(0))
-            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays,
-                       shadow_hits, j, shadow_radiance, caustic_map, &cprm);
-    }
-    for (uint i = get_group_id(0); i < n; i += get_num_groups(0)) {
+    /* uniform: a group per ray while few (level depth - 1's only from coop_from on) */
+    const bool on_shadow = coop_shadow && n_shadow <= TRACE_COOP_MAX_RAYS;
+    const bool on = n <= TRACE_COOP_MAX_RAYS;
+    TRACE_COOP_FOR(j, n_shadow, on_shadow)
+        shadow_ray(TRACE_COOP_IF_ARGS(&coop, on_shadow), RENDER_GEOM_ARGS, prm, lights,
+                   shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm);
+    TRACE_COOP_FOR(i, n, on) {
         const Ray r = rays[i];
-        const Hit h = trace_ray(TRACE_COOP_ARGS(&coop), &r, depth);
-        if (get_local_id(0) == 0) {
+        const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);
+        if (!on || get_local_id(0) == 0) {
             hits[i] = h;
             shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
                       write_aov);

@@ -46,10 +46,11 @@ __kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void rend
 {
     __local TraceCoop coop;
     const uint n = counts[depth];
-    for (uint i = get_group_id(0); i < n; i += get_num_groups(0)) {
+    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
+    TRACE_COOP_FOR(i, n, on) {
         const Ray r = rays[i];
-        const Hit h = trace_ray(TRACE_COOP_ARGS(&coop), &r, depth);
-        if (get_local_id(0) == 0) hits[i] = h;
+        const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);
+        if (!on || get_local_id(0) == 0) hits[i] = h;
     }
 }
 
@@ -63,10 +64,11 @@ render_trace_shade_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Rende
 {
     __local TraceCoop coop;
     const uint n = counts[depth];
-    for (uint i = get_group_id(0); i < n; i += get_num_groups(0)) {
+    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
+    TRACE_COOP_FOR(i, n, on) {
         const Ray r = rays[i];
-        const Hit h = trace_ray(TRACE_COOP_ARGS(&coop), &r, depth);
-        if (get_local_id(0) == 0) {
+        const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);
+        if (!on || get_local_id(0) == 0) {
             hits[i] = h;
             shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
                       write_aov);

@@ -72,6 +72,16 @@ typedef struct {
 #define TRACE_ARGS SCENE_ARGS, coop, coop_on
 #define TRACE_SERIAL_ARGS SCENE_ARGS, (__local TraceCoop*)0, false
 #define TRACE_COOP_ARGS(scratch) SCENE_ARGS, (scratch), true
+#define TRACE_COOP_IF_ARGS(scratch, on) SCENE_ARGS, (scratch), (on)
+/* A level's rays are traversed one per work-group only while they are few: at most
+   TRACE_COOP_MAX_RAYS (the device-side count; raytrace.render.COOP_MAX_RAYS mirrors it). Above
+   it (the H200: a group per ray was slower than a work-item per ray from about 10^4 rays on) a
+   cooperative kernel takes one ray per work-item. */
+#define TRACE_COOP_MAX_RAYS 4096
+/* for each ray i < n: one per work-group (coop_on) or one per work-item */
+#define TRACE_COOP_FOR(i, n, on)                                                            \
+    for (uint i = (on) ? get_group_id(0) : get_global_id(0); i < (n);                      \
+         i += (on) ? get_num_groups(0) : get_global_size(0))
 /* the one work-item that writes a cooperative ray's results */
 #define TRACE_LEADER (!coop_on || get_local_id(0) == 0)
 #else
@@ -264,17 +274,6 @@ TRACE_INLINE bool trace_scene_coop(SCENE_PARAMS, __local TraceCoop* coop, float3
 #endif
 }
 #endif
-
-/* trace_scene for the per-ray bodies (TRACE_PARAMS): per work-item, or per work-group when
-   coop_on in a TRACE_COOP build. Closest hit or (any) the first found, in *hit. */
-TRACE_INLINE bool trace_masked(TRACE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
-                               bool any, uint mask, Hit* hit, int kind) {
-#if TRACE_COOP
-    if (coop_on) return trace_scene_coop(SCENE_ARGS, coop, org, dir, tmin, tmax, any, mask, hit,
-                                         kind);
-#endif
-    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, kind);
-}
 
 /* scene_closest_hit_masked / scene_any_hit_masked for the per-ray bodies (TRACE_PARAMS):
    per work-item, or per work-group when coop_on in a TRACE_COOP build. */

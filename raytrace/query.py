@@ -19,6 +19,9 @@ from raytrace.scene import MASK_ALL, Scene
 #: most work-groups a cooperative launch uses (a grid stride covers the rest).
 COOP_WIDTH = 32
 COOP_MAX_GROUPS = 8192
+#: The renderer's cooperative kernels take a work-group per ray only for a level of at most so
+#: many rays, else a work-item per ray (kernels/traverse_coop.h TRACE_COOP_MAX_RAYS).
+COOP_MAX_RAYS = 4096
 
 
 def pack_rays(origins, directions, tmin=0.0, tmax=np.inf) -> tuple[np.ndarray, np.ndarray]:

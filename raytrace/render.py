@@ -73,7 +73,7 @@ from kernels.pinned import PinnedRing, ReadHandle
 from kernels.runtime import Runtime
 from raytrace.bvh import HIT_DTYPE
 from raytrace.caustics import CAUSTIC_PARAMS
-from raytrace.query import COOP_MAX_GROUPS, COOP_WIDTH
+from raytrace.query import COOP_MAX_GROUPS, COOP_MAX_RAYS, COOP_WIDTH
 from raytrace.render_scene import RenderScene
 from raytrace.render_types import (
     AOV,
@@ -620,8 +620,10 @@ class Renderer:
         def coop(d: int) -> bool:   # level d's rays are traversed one per work-group
             return s.coop_from is not None and d >= s.coop_from
 
-        def coop_size(n: int) -> tuple:   # a work-group per ray of about n, at most so many
-            return (COOP_WIDTH * max(1, min(n, COOP_MAX_GROUPS)),)
+        def coop_size(n: int) -> tuple:   # for about n rays: a work-group per ray while they
+            if n <= COOP_MAX_RAYS:        # are few (the kernel decides from the device count),
+                return (COOP_WIDTH * max(1, min(n, COOP_MAX_GROUPS)),)
+            return (-(-n // COOP_WIDTH) * COOP_WIDTH,)   # else a work-item per ray
 
         def per_ray(k: dict, name: str, d: int, size: tuple) -> None:  # either flavour
             if coop(d):
@@ -663,12 +665,13 @@ class Renderer:
                 bind(k["scatter"], gp=g_scatter)
                 launch(k["scatter"], scatter_size, ls)
                 if has_lights and coop(depth + 1):
-                    # a group per ray of level d + 1 (and of level d's shadow rays if coop(d),
-                    # else a work-item per shadow ray: the serial part runs first)
-                    groups = coop_size(max(next_size[0], ray_size[0] * coop(depth)))
-                    serial = 0 if coop(depth) else -(-ray_size[0] // COOP_WIDTH) * COOP_WIDTH
-                    launch(nxt["shadow_" + trace + "_coop"], (max(groups[0], serial),),
-                           (COOP_WIDTH,))
+                    # a group per ray of level d + 1 (and of level d's shadow rays if coop(d)),
+                    # each part while it has at most COOP_MAX_RAYS rays, else a work-item per
+                    # ray; the shadow part runs first
+                    shadows = (coop_size(ray_size[0])[0] if coop(depth)
+                               else -(-ray_size[0] // COOP_WIDTH) * COOP_WIDTH)
+                    launch(nxt["shadow_" + trace + "_coop"],
+                           (max(coop_size(next_size[0])[0], shadows),), (COOP_WIDTH,))
                 elif has_lights:
                     launch(nxt["shadow_" + trace], (ray_size[0] + next_size[0],), ls)
                 else:

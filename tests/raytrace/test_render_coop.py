@@ -77,6 +77,37 @@ def test_coplanar_ties_differ_only_in_the_triangle(binary_rt):  # noqa: F811
     assert np.array_equal(on, off) and np.array_equal(fb_on, fb_off) and st_on == st_off
 
 
+def test_a_level_of_many_rays_goes_one_per_work_item(binary_rt):  # noqa: F811
+    """The cooperative kernels take a work-group per ray only while a level has at most
+    COOP_MAX_RAYS rays (the device-side count): coop_from 0 on 4800 primary rays traces level 0
+    one ray per work-item in them, the deeper levels a group per ray; the serial image, and the
+    same bytes in either order of the levels."""
+    from raytrace.query import COOP_MAX_RAYS
+
+    rt = binary_rt
+    s = RenderSettings(width=80, height=60, bounces=2, spp=1)
+    scene = build(rt, 2)
+    _, want, _, st = frame(rt, scene, s)
+    assert st["rays_per_depth"][0] > COOP_MAX_RAYS >= st["rays_per_depth"][1] > 0
+    c = dataclasses.replace(s, coop_from=0)
+    _, on, fb_on, st_on = frame(rt, scene, c)
+    _, off, fb_off, st_off = frame(rt, scene, dataclasses.replace(c, overlap_levels=False))
+    assert close(on, want) and st_on == st
+    assert np.array_equal(on, off) and np.array_equal(fb_on, fb_off) and st_on == st_off
+
+
+def test_header_mirrors():
+    import re
+    from pathlib import Path
+
+    from raytrace.query import COOP_MAX_RAYS, COOP_WIDTH
+
+    text = (Path(__file__).parents[2] / "kernels" / "traverse_coop.h").read_text()
+    defs = dict(re.findall(r"#define (TRACE_COOP_\w+) (\d+)", text))
+    assert int(defs["TRACE_COOP_WIDTH"]) == COOP_WIDTH
+    assert int(defs["TRACE_COOP_MAX_RAYS"]) == COOP_MAX_RAYS
+
+
 def test_the_device_choice_is_cooperative_only_on_a_gpu_with_the_binary_layout(rt):
     """A frame's coop_from (raytrace.render.device_coop_from): GPU_COOP_FROM on a GPU with the
     binary BVH layout, off on a CPU (a 32-wide group would trace each ray 32 times over)."""
