@@ -20,11 +20,10 @@ if [ "$part" = a ]; then
         tests/raytrace/test_render_coop.py tests/raytrace/test_render_overlap.py \
         tests/lbm/test_bodies_fast.py tests/app/test_frame_pipeline.py 2>&1 | tail -4
     for rep in 1 2; do   # the tail levels: serial (off) against cooperative from depth D
-        for c in off 2 3; do
+        for c in off 1 2 3; do
             lb bench frame $f $static --coop-from $c --out "$out/static_coop${c}_$rep" | tail -1
+            lb bench frame $f --coop-from $c --out "$out/pool_coop${c}_$rep" | tail -1
         done
-        lb bench frame $f --coop-from off --out "$out/pool_coopoff_$rep" | tail -1
-        lb bench frame $f --out "$out/pool_$rep" | tail -1
     done
     lb bench frame $f $static --per-depth --out "$out/static_perdepth" | tail -1
     lb bench frame $f --per-depth --out "$out/pool_perdepth" | tail -1
