@@ -402,7 +402,15 @@ TRACE_INLINE bool trace_blas(__global const WideNode* restrict nodes,
     }
 }
 #else
-/* One mesh's BVH from `root`. Shrinks *tmax to each closer hit and records it in *hit. */
+/* Of two hits at one distance, is (inst, prim) the one to keep over *hit? The smaller pair:
+   the same rule as the cooperative walk (traverse_coop.h), so both give the same hit whatever
+   order they meet the triangles in. */
+TRACE_INLINE bool trace_tie_wins(int inst, int prim, const Hit* hit) {
+    return inst < hit->inst || (inst == hit->inst && prim < hit->prim);
+}
+
+/* One mesh's BVH from `root`. Shrinks *tmax to each closer hit and records it in *hit; of hits
+   at one distance, the smaller (inst, prim) (trace_tie_wins). */
 TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
                              __global const BvhTri* restrict tris, int root, const TraceRay* r,
                              float tmin, float* tmax, Hit* hit, int inst, bool any,
@@ -430,8 +438,12 @@ TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
                 for (int k = first; k < first + cnt; ++k) {
                     float t, u, v;
                     BvhTri tri = tris[k];
-                    if (trace_triangle(r, tri.p0.xyz, tri.p1.xyz, tri.p2.xyz, tmin, *tmax, &t,
-                                       &u, &v)) {
+                    /* a hit at the distance of the closest so far is tested too: of two at one
+                       distance the smaller (inst, prim) wins (trace_tie_wins) */
+                    const bool have = hit->prim >= 0;
+                    if (trace_triangle(r, tri.p0.xyz, tri.p1.xyz, tri.p2.xyz, tmin,
+                                       have ? nextafter(*tmax, INFINITY) : *tmax, &t, &u, &v)
+                        && (!have || t < *tmax || trace_tie_wins(inst, as_int(tri.p0.w), hit))) {
                         *tmax = t;
                         hit->t = t;
                         hit->u = u;
@@ -444,8 +456,10 @@ TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
                 }
             }
         }
-        /* tl is INFINITY on a miss: the strict test also drops boxes now behind a closer hit */
-        bool gl = cl == 0 && tl < *tmax, gr = cr == 0 && tr < *tmax;
+        /* tl is INFINITY on a miss; boxes behind the closest hit are dropped, those entered at
+           its distance kept (a tie may be there) */
+        bool gl = cl == 0 && tl <= *tmax && tl < INFINITY;
+        bool gr = cr == 0 && tr <= *tmax && tr < INFINITY;
         if (!trace_next(gl, gr, tl, tr, rl, rr, stack, &sp, &node, trace_stats)) break;
     }
     return found;
@@ -509,7 +523,8 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
                 }
             }
         }
-        bool gl = cl == 0 && tl < tbest, gr = cr == 0 && tr < tbest;
+        bool gl = cl == 0 && tl <= tbest && tl < INFINITY;
+        bool gr = cr == 0 && tr <= tbest && tr < INFINITY;
         if (!trace_next(gl, gr, tl, tr, rl, rr, stack, &sp, &node, trace_stats)) break;
     }
     return found;

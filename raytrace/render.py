@@ -33,15 +33,16 @@ to overlap only the tail levels of few rays. The levels' hits live in two buffer
 radiance too; unfused, level d + 1's shade runs after level d's accumulation on the in-order
 queue and one radiance buffer serves.
 
-``coop_from`` D (None: off) traverses the trace and shadow rays of the levels from D on one per
-work-group of 32 (``kernels/traverse_coop.h``, the ``*_coop`` kernels of a ``TRACE_COOP=1``
-build, launched for about one group per ray): the tail levels (1080p on the H200: 36k, 12k, 4k,
-0.9k rays at depths 2-5) are latency-bound, each launch about one ray's chain of ~200-300
-dependent node reads (0.16 ms for 884 rays), and 32 work-items popping 32 nodes a round shorten
-that chain. Either order; level d - 1's shadow rays in the combined launch stay one per
-work-item when d - 1 < D. The image is the per-work-item one except where two triangles are hit
-at exactly the same distance (the walk then keeps the smallest instance and triangle ids), and
-for one ``coop_from`` the same bytes in either order.
+``coop_from`` D (None: off; ``device_coop_from``: 2 on a GPU) lets the trace and shadow rays
+of the levels from D on be traversed one per work-group of 32 (``kernels/traverse_coop.h``,
+the ``*_coop`` kernels of a ``TRACE_COOP=1`` build, about one group per ray): a tail level of
+few rays is latency-bound, its launch about one ray's chain of ~200-300 dependent node reads
+(0.16 ms for 884 rays on the H200), and 32 work-items popping 32 nodes a round shorten that
+chain. With many rays a work-item per ray is faster (the pool's 36k depth-2 rays: 2x), so a
+level takes the cooperative kernel only while its size hint is at most ``COOP_MAX_RAYS``, and
+that kernel goes one ray per work-item if the device-side count is above it. Both walks give
+the same hit, ties included (of two triangles at one distance, the smaller instance and
+triangle ids: kernels/traverse.h ``trace_tie_wins``), so the choice never shows in the image.
 
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
 the shading), either order. Every kernel (``kernels.launch.Kernel``) belongs to this renderer
@@ -617,8 +618,11 @@ class Renderer:
         def overlapped(d: int) -> bool:   # level d's shadow rays go with level d + 1's trace
             return s.overlap_levels and s.overlap_from <= d < deepest
 
-        def coop(d: int) -> bool:   # level d's rays are traversed one per work-group
+        def coop(d: int) -> bool:   # level d's rays may be traversed one per work-group
             return s.coop_from is not None and d >= s.coop_from
+
+        def few(d: int, n: int) -> bool:   # ... and are, by the size hint: about n rays (the
+            return coop(d) and n <= COOP_MAX_RAYS   # hits are the same either way)
 
         def coop_size(n: int) -> tuple:   # for about n rays: a work-group per ray while they
             if n <= COOP_MAX_RAYS:        # are few (the kernel decides from the device count),
@@ -626,7 +630,7 @@ class Renderer:
             return (-(-n // COOP_WIDTH) * COOP_WIDTH,)   # else a work-item per ray
 
         def per_ray(k: dict, name: str, d: int, size: tuple) -> None:  # either flavour
-            if coop(d):
+            if few(d, size[0]):
                 launch(k[name + "_coop"], coop_size(size[0]), (COOP_WIDTH,))
             else:
                 launch(k[name], size, ls)
@@ -664,7 +668,7 @@ class Renderer:
                 launch(k["scan"], scan_size, scan_ls)
                 bind(k["scatter"], gp=g_scatter)
                 launch(k["scatter"], scatter_size, ls)
-                if has_lights and coop(depth + 1):
+                if has_lights and (few(depth + 1, next_size[0]) or few(depth, ray_size[0])):
                     # a group per ray of level d + 1 (and of level d's shadow rays if coop(d)),
                     # each part while it has at most COOP_MAX_RAYS rays, else a work-item per
                     # ray; the shadow part runs first
