@@ -20,7 +20,7 @@ if [ "$part" = a ]; then
         tests/raytrace/test_render_coop.py tests/raytrace/test_render_overlap.py \
         tests/lbm/test_bodies_fast.py tests/app/test_frame_pipeline.py 2>&1 | tail -4
     for rep in 1 2; do   # the tail levels: serial (off) against cooperative from depth D
-        for c in off 1 2 3; do
+        for c in off 2; do
             lb bench frame $f $static --coop-from $c --out "$out/static_coop${c}_$rep" | tail -1
             lb bench frame $f --coop-from $c --out "$out/pool_coop${c}_$rep" | tail -1
         done

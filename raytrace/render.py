@@ -39,7 +39,7 @@ the ``*_coop`` kernels of a ``TRACE_COOP=1`` build, about one group per ray): a 
 few rays is latency-bound, its launch about one ray's chain of ~200-300 dependent node reads
 (0.16 ms for 884 rays on the H200), and 32 work-items popping 32 nodes a round shorten that
 chain. With many rays a work-item per ray is faster (the pool's 36k depth-2 rays: 2x), so a
-level takes the cooperative kernel only while its size hint is at most ``COOP_MAX_RAYS``, and
+level takes the cooperative kernel only while its last ray count is at most ``COOP_MAX_RAYS``, and
 that kernel goes one ray per work-item if the device-side count is above it. Both walks give
 the same hit, ties included (of two triangles at one distance, the smaller instance and
 triangle ids: kernels/traverse.h ``trace_tie_wins``), so the choice never shows in the image.
@@ -579,13 +579,17 @@ class Renderer:
         self._bind_caustics()
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
         sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
+        # levels of few rays by the last counts: their trace and shadow rays one per work-group
+        few = tuple(None if hint is None or d >= len(hint) or s.coop_from is None
+                    or d < s.coop_from or hint[d] > COOP_MAX_RAYS else int(hint[d])
+                    for d in range(deepest + 1))
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
-               s.overlap_levels, s.overlap_from, s.coop_from, self._bind_version)
+               s.overlap_levels, s.overlap_from, few, self._bind_version)
         ops = self._plans.get(key)
         if ops is None:
             if len(self._plans) >= 16:
                 self._plans.clear()
-            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2])
+            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few)
         self._run(ops, rebind=len(self._plan) > 1 or ops is not self._last_ops)
         self._last_ops = ops
         old = self._stats_handle
@@ -597,9 +601,10 @@ class Renderer:
     #: (Kernel, {name: value}; with one chunk only when the plan changes) and a flush.
     _LAUNCH, _BIND, _FLUSH = 0, 1, 2
 
-    def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool) -> list:
+    def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool, few: tuple) -> list:
         """The frame's launches in order, sizes and arguments decided: what the per-frame loop
-        did, made once per (sizes, depth, lights, stage names, bindings)."""
+        did, made once per (sizes, depth, lights, stage names, levels of few rays, bindings).
+        ``few[d]``: level d's last ray count where its rays go one per work-group, else None."""
         s, ks = self.settings, self._k
         ls, scan_ls = (s.local_size,), (SCAN_WG,)
         ops = []
@@ -618,20 +623,17 @@ class Renderer:
         def overlapped(d: int) -> bool:   # level d's shadow rays go with level d + 1's trace
             return s.overlap_levels and s.overlap_from <= d < deepest
 
-        def coop(d: int) -> bool:   # level d's rays may be traversed one per work-group
-            return s.coop_from is not None and d >= s.coop_from
+        def coop(d: int) -> bool:   # level d's rays go one per work-group (the hits are the
+            return few[d] is not None   # same either way)
 
-        def few(d: int, n: int) -> bool:   # ... and are, by the size hint: about n rays (the
-            return coop(d) and n <= COOP_MAX_RAYS   # hits are the same either way)
-
-        def coop_size(n: int) -> tuple:   # for about n rays: a work-group per ray while they
-            if n <= COOP_MAX_RAYS:        # are few (the kernel decides from the device count),
-                return (COOP_WIDTH * max(1, min(n, COOP_MAX_GROUPS)),)
-            return (-(-n // COOP_WIDTH) * COOP_WIDTH,)   # else a work-item per ray
+        def coop_size(d: int, size: int) -> int:   # work-items for level d: a work-group per
+            if coop(d):                            # ray (the kernel checks the device count)
+                return COOP_WIDTH * max(1, min(few[d] * 5 // 4 + 1, COOP_MAX_GROUPS))
+            return -(-size // COOP_WIDTH) * COOP_WIDTH   # else a work-item per ray
 
         def per_ray(k: dict, name: str, d: int, size: tuple) -> None:  # either flavour
-            if few(d, size[0]):
-                launch(k[name + "_coop"], coop_size(size[0]), (COOP_WIDTH,))
+            if coop(d):
+                launch(k[name + "_coop"], (coop_size(d, size[0]),), (COOP_WIDTH,))
             else:
                 launch(k[name], size, ls)
 
@@ -668,14 +670,13 @@ class Renderer:
                 launch(k["scan"], scan_size, scan_ls)
                 bind(k["scatter"], gp=g_scatter)
                 launch(k["scatter"], scatter_size, ls)
-                if has_lights and (few(depth + 1, next_size[0]) or few(depth, ray_size[0])):
+                if has_lights and (coop(depth + 1) or coop(depth)):
                     # a group per ray of level d + 1 (and of level d's shadow rays if coop(d)),
                     # each part while it has at most COOP_MAX_RAYS rays, else a work-item per
                     # ray; the shadow part runs first
-                    shadows = (coop_size(ray_size[0])[0] if coop(depth)
-                               else -(-ray_size[0] // COOP_WIDTH) * COOP_WIDTH)
                     launch(nxt["shadow_" + trace + "_coop"],
-                           (max(coop_size(next_size[0])[0], shadows),), (COOP_WIDTH,))
+                           (max(coop_size(depth + 1, next_size[0]),
+                                coop_size(depth, ray_size[0])),), (COOP_WIDTH,))
                 elif has_lights:
                     launch(nxt["shadow_" + trace], (ray_size[0] + next_size[0],), ls)
                 else:

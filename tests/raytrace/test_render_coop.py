@@ -37,13 +37,13 @@ def test_coop_levels_give_the_serial_image(binary_rt, coop_from, fused, lights, 
     assert same(on, want) and st_on == st
     assert np.array_equal(on, off) and np.array_equal(fb_on, fb_off) and st_on == st_off
     assert scene.scene.coop_redos() == 0
-    # the next frame's size hints are this one's counts, all few: the cooperative kernels ran
-    # (local size 32), for the same bytes
+    # the next frame's plan has this one's counts, all few: with one chunk the cooperative
+    # kernels ran (local size 32), for the same bytes (several chunks have no counts to go by)
     for r in (r_on, r_off):
         assert same(r.render(), want)
         coop = [op for op in r._last_ops if op[0] == r._LAUNCH and op[1].function_name.endswith(
             "_coop")]
-        assert coop and all(op[3] == (32,) for op in coop)
+        assert all(op[3] == (32,) for op in coop) and bool(coop) == (len(r.chunks) == 1)
 
 
 def test_set_coop_switches_and_validates(binary_rt):  # noqa: F811
@@ -77,11 +77,12 @@ def test_coplanar_ties_give_the_serial_bytes(binary_rt):  # noqa: F811
     assert np.array_equal(on, off) and np.array_equal(fb_on, fb_off) and st_on == st_off
 
 
-def test_a_level_of_many_rays_goes_one_per_work_item(binary_rt):  # noqa: F811
-    """The cooperative kernels take a work-group per ray only while a level has at most
-    COOP_MAX_RAYS rays (the device-side count): coop_from 0 on 4800 primary rays traces level 0
-    one ray per work-item in them, the deeper levels a group per ray; the serial image, and the
-    same bytes in either order of the levels."""
+def test_a_level_of_many_rays_goes_one_per_work_item(binary_rt, monkeypatch):  # noqa: F811
+    """The cooperative kernels check the device-side count: a level of more than
+    TRACE_COOP_MAX_RAYS rays goes one ray per work-item in them (here the plan is made to pick
+    them for level 0's 4800 primary rays: the host's threshold raised), the deeper levels a
+    group per ray; the serial bytes, in either order of the levels."""
+    import raytrace.render as render_module
     from raytrace.query import COOP_MAX_RAYS
 
     rt = binary_rt
@@ -89,11 +90,14 @@ def test_a_level_of_many_rays_goes_one_per_work_item(binary_rt):  # noqa: F811
     scene = build(rt, 2)
     _, want, _, st = frame(rt, scene, s)
     assert st["rays_per_depth"][0] > COOP_MAX_RAYS >= st["rays_per_depth"][1] > 0
-    c = dataclasses.replace(s, coop_from=0)
-    _, on, fb_on, st_on = frame(rt, scene, c)
-    _, off, fb_off, st_off = frame(rt, scene, dataclasses.replace(c, overlap_levels=False))
-    assert same(on, want) and st_on == st
-    assert np.array_equal(on, off) and np.array_equal(fb_on, fb_off) and st_on == st_off
+    monkeypatch.setattr(render_module, "COOP_MAX_RAYS", 10**9)
+    for overlap in (True, False):
+        r, got, *_ = frame(rt, scene, dataclasses.replace(s, coop_from=0,
+                                                           overlap_levels=overlap))
+        assert same(got, want)
+        assert same(r.render(), want)   # the plan from the counts: level 0 cooperative too
+        names = [op[1].function_name for op in r._last_ops if op[0] == r._LAUNCH]
+        assert names[1] == "render_trace_coop"   # after raygen: level 0's trace
 
 
 def test_header_mirrors():
