@@ -466,6 +466,16 @@ TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
 }
 #endif
 
+/* A world ray in instance ``ins``'s object space, prepared for its BLAS. */
+TRACE_INLINE TraceRay trace_object_ray(__global const Instance* ins, float3 org, float3 dir) {
+    float4 m0 = ins->object_from_world[0], m1 = ins->object_from_world[1],
+           m2 = ins->object_from_world[2];
+    float3 o = (float3)(dot(m0.xyz, org) + m0.w, dot(m1.xyz, org) + m1.w,
+                        dot(m2.xyz, org) + m2.w);
+    float3 dd = (float3)(dot(m0.xyz, dir), dot(m1.xyz, dir), dot(m2.xyz, dir));
+    return trace_ray_setup(o, dd);
+}
+
 /* The whole scene: the TLAS over instances, each instance's BLAS in its object space; only
    instances whose visibility mask shares a bit with `mask`. `work`: the counters of a
    TRACE_COUNT build (unused otherwise). */
@@ -501,12 +511,7 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
                     __global const Instance* ins = instances + id;
                     int broot = ins->blas_root;
                     if (broot < 0 || !(ins->mask & mask)) continue;
-                    float4 m0 = ins->object_from_world[0], m1 = ins->object_from_world[1],
-                           m2 = ins->object_from_world[2];
-                    float3 o = (float3)(dot(m0.xyz, org) + m0.w, dot(m1.xyz, org) + m1.w,
-                                        dot(m2.xyz, org) + m2.w);
-                    float3 dd = (float3)(dot(m0.xyz, dir), dot(m1.xyz, dir), dot(m2.xyz, dir));
-                    TraceRay lr = trace_ray_setup(o, dd);
+                    TraceRay lr = trace_object_ray(ins, org, dir);
                     TRACE_TICK(work, TRACE_CNT_ENTRIES, 1);
 #if TRACE_COUNT
                     uint before = work[TRACE_CNT_BLAS];

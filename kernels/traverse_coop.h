@@ -168,15 +168,7 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
         float b = fmin(sb, pt);
         if (!(lid < take && e_t <= b)) continue;
         TraceRay r = wr;
-        if (e_inst >= 0) {
-            __global const Instance* ins = instances + e_inst;
-            float4 m0 = ins->object_from_world[0], m1 = ins->object_from_world[1],
-                   m2 = ins->object_from_world[2];
-            float3 o = (float3)(dot(m0.xyz, org) + m0.w, dot(m1.xyz, org) + m1.w,
-                                dot(m2.xyz, org) + m2.w);
-            float3 dd = (float3)(dot(m0.xyz, dir), dot(m1.xyz, dir), dot(m2.xyz, dir));
-            r = trace_ray_setup(o, dd);
-        }
+        if (e_inst >= 0) r = trace_object_ray(instances + e_inst, org, dir);
         __global const BvhNode* n = (e_inst < 0 ? tlas_nodes : blas_nodes) + e_node;
         float4 a = n->lo_l, bb = n->hi_l, c = n->lo_r, d = n->hi_r;
         int cl = as_int(bb.w), cr = as_int(d.w);
