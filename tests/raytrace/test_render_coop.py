@@ -125,3 +125,24 @@ def test_the_device_choice_is_cooperative_only_on_a_gpu_with_the_binary_layout(r
     assert device_coop_from(types.SimpleNamespace(is_gpu=False, bvh_layout="binary")) is None
     assert device_coop_from(rt) == (GPU_COOP_FROM if rt.is_gpu and rt.bvh_layout == "binary"
                                     else None)
+
+
+def test_plan_picks_the_cooperative_kernels_by_the_last_counts(binary_rt):  # noqa: F811
+    """Levels of few rays (their last counts, ``few``) take the cooperative kernels; a combined
+    launch of level d's shadow rays and level d + 1's trace takes them when both levels are few
+    or level d comes before coop_from, not for a tail level's many shadow rays beside few."""
+    rt = binary_rt
+    r, *_ = frame(rt, build(rt, 2), RenderSettings(width=16, height=12, bounces=3, coop_from=2))
+    sizes = tuple(r._launch_sizes(depths, None) for *_, depths in r._plan)
+
+    def kernels(few):
+        return [op[1].function_name for op in r._make_plan(sizes, 3, True, few)
+                if op[0] == r._LAUNCH]
+
+    assert not any(n.endswith("_coop") for n in kernels((None,) * 4))
+    both = kernels((None, None, 90, 40))      # S1+T2, S2+T3 cooperative, S3 too
+    assert both.count("render_shadow_trace_coop") == 2 and "render_shadow_coop" in both
+    tail = kernels((None, None, None, 40))    # level 2 many: S2+T3 plain, S3 cooperative
+    assert "render_shadow_trace_coop" not in tail and "render_shadow_coop" in tail
+    first = kernels((None, None, 90, None))   # S1+T2 cooperative (level 1 is before coop_from)
+    assert first.count("render_shadow_trace_coop") == 1 and "render_shadow_coop" not in first
