@@ -127,9 +127,9 @@ class RenderSettings:
                                   #: go with level d + 1's trace (the levels before: alone;
                                   #: level 0's 2M shadow rays with level 1's trace were slower
                                   #: on the H200 than apart: BENCHMARKS.md)
-    coop_from: int | None = None  #: the first level d whose trace and shadow rays are traversed
-                                  #: one per work-group of 32 (kernels/traverse_coop.h: the
-                                  #: latency-bound tail levels of few rays); None: never
+    coop_from: int | None = None  #: the first level d whose trace and shadow rays may be
+                                  #: traversed one per work-group of 32 while few (at most
+                                  #: COOP_MAX_RAYS; kernels/traverse_coop.h); None: never
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -170,8 +170,9 @@ def bytes_per_ray_slot(settings: RenderSettings) -> int:
     return BYTES_PER_RAY_SLOT + s.overlap_levels * (HIT_DTYPE.itemsize + 16 * s.fuse_trace_shade)
 
 
-#: ``coop_from`` on a GPU (binary BVH layout): from depth 2 on, the tail levels of a few
-#: thousand rays or fewer (BENCHMARKS.md, "third session": 1 is 8x slower, 3 a little slower).
+#: ``coop_from`` on a GPU (binary BVH layout): depth 2, so that the launch of level 1's ~1M
+#: shadow rays (a work-item each) with a depth 2 of few rays takes the cooperative kernel too
+#: (0.852 against 0.867 ms on the H200; BENCHMARKS.md, "third session").
 GPU_COOP_FROM = 2
 
 
@@ -367,10 +368,9 @@ class Renderer:
         self._bound_sig = None  # rebind: the kernels of the new order, to these buffers
 
     def set_coop(self, first: int | None) -> None:
-        """Traverse the trace and shadow rays of levels ``first`` and deeper one per
-        work-group (``coop_from``; None: none) from the next frame on; an A/B switch (bench
-        frame --coop-from). The image differs only where two triangles are hit at exactly the
-        same distance (kernels/traverse_coop.h)."""
+        """Let the trace and shadow rays of levels ``first`` and deeper go one per work-group
+        while few (``coop_from``; None: none) from the next frame on; an A/B switch (bench
+        frame --coop-from). The same image either way (the same hits, ties included)."""
         new = dataclasses.replace(self.settings, coop_from=first).resolved()
         if new == self.settings:
             return
