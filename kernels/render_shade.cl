@@ -43,10 +43,7 @@ __kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void rend
     const CausticParams cprm)
 {
     __local TraceCoop coop;
-    const uint n = counts[depth];
-    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
-    TRACE_COOP_FOR(i, n, on)
-        shadow_ray(TRACE_COOP_IF_ARGS(&coop, on), RENDER_GEOM_ARGS, prm, lights, rays, hits, i,
-                   radiance, caustic_map, &cprm);
+    shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, counts[depth], true,
+                     radiance, caustic_map, &cprm, &coop);
 }
 #endif

@@ -113,4 +113,22 @@ inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, __constant const Render
     if (TRACE_LEADER) radiance[i] += (float4)(w * sum, 0.0f);
 }
 
+#if TRACE_COOP
+/* The shadow rays of the n hits of a level: a work-group per ray while few (and ``allowed``),
+ * else a work-item per ray; ``allowed`` uniform over the work-group. */
+inline void shadow_rays_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                             __global const Light* restrict lights,
+                             __global const Ray* restrict rays,
+                             __global const Hit* restrict hits, const uint n, const bool allowed,
+                             __global float4* restrict radiance,
+                             __global const float4* restrict caustic_map,
+                             const CausticParams* cp, __local TraceCoop* coop)
+{
+    const bool on = allowed && n <= TRACE_COOP_MAX_RAYS;
+    TRACE_COOP_FOR(i, n, on)
+        shadow_ray(TRACE_COOP_IF_ARGS(coop, on), RENDER_GEOM_ARGS, prm, lights, rays, hits, i,
+                   radiance, caustic_map, cp);
+}
+#endif
+
 #endif

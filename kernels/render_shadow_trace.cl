@@ -86,13 +86,11 @@ render_shadow_trace_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Rend
                          const uint coop_shadow)
 {
     __local TraceCoop coop;
-    const uint n_shadow = counts[depth - 1u], n = counts[depth];
-    /* uniform: a group per ray while few (level depth - 1's only from coop_from on) */
-    const bool on_shadow = coop_shadow && n_shadow <= TRACE_COOP_MAX_RAYS;
-    const bool on = n <= TRACE_COOP_MAX_RAYS;
-    TRACE_COOP_FOR(j, n_shadow, on_shadow)
-        shadow_ray(TRACE_COOP_IF_ARGS(&coop, on_shadow), RENDER_GEOM_ARGS, prm, lights,
-                   shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm);
+    /* level depth - 1's shadow rays a group each only from coop_from on (coop_shadow) */
+    shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
+                     counts[depth - 1u], coop_shadow, shadow_radiance, caustic_map, &cprm, &coop);
+    const uint n = counts[depth];
+    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
     TRACE_COOP_FOR(i, n, on) {
         const Ray r = rays[i];
         const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);
@@ -116,13 +114,11 @@ render_shadow_trace_shade_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                const uint write_aov, const uint coop_shadow)
 {
     __local TraceCoop coop;
-    const uint n_shadow = counts[depth - 1u], n = counts[depth];
-    /* uniform: a group per ray while few (level depth - 1's only from coop_from on) */
-    const bool on_shadow = coop_shadow && n_shadow <= TRACE_COOP_MAX_RAYS;
-    const bool on = n <= TRACE_COOP_MAX_RAYS;
-    TRACE_COOP_FOR(j, n_shadow, on_shadow)
-        shadow_ray(TRACE_COOP_IF_ARGS(&coop, on_shadow), RENDER_GEOM_ARGS, prm, lights,
-                   shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm);
+    /* level depth - 1's shadow rays a group each only from coop_from on (coop_shadow) */
+    shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
+                     counts[depth - 1u], coop_shadow, shadow_radiance, caustic_map, &cprm, &coop);
+    const uint n = counts[depth];
+    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
     TRACE_COOP_FOR(i, n, on) {
         const Ray r = rays[i];
         const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);

@@ -579,9 +579,11 @@ class Renderer:
         self._bind_caustics()
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
         sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
-        # levels of few rays by the last counts: their trace and shadow rays one per work-group
+        # levels of few rays by the last counts: their trace and shadow rays one per work-group,
+        # about that many groups (the count's next power of two: the plan stays while it holds)
         few = tuple(None if hint is None or d >= len(hint) or s.coop_from is None
-                    or d < s.coop_from or hint[d] > COOP_MAX_RAYS else int(hint[d])
+                    or d < s.coop_from or hint[d] > COOP_MAX_RAYS
+                    else 1 << max(0, int(hint[d]) - 1).bit_length()
                     for d in range(deepest + 1))
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
                s.overlap_levels, s.overlap_from, few, self._bind_version)
@@ -604,7 +606,8 @@ class Renderer:
     def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool, few: tuple) -> list:
         """The frame's launches in order, sizes and arguments decided: what the per-frame loop
         did, made once per (sizes, depth, lights, stage names, levels of few rays, bindings).
-        ``few[d]``: level d's last ray count where its rays go one per work-group, else None."""
+        ``few[d]``: where level d's rays go one per work-group, the power of two at or above its
+        last ray count (its work-groups), else None."""
         s, ks = self.settings, self._k
         ls, scan_ls = (s.local_size,), (SCAN_WG,)
         ops = []
@@ -628,7 +631,7 @@ class Renderer:
 
         def coop_size(d: int, size: int) -> int:   # work-items for level d: a work-group per
             if coop(d):                            # ray (the kernel checks the device count)
-                return COOP_WIDTH * max(1, min(few[d] * 5 // 4 + 1, COOP_MAX_GROUPS))
+                return COOP_WIDTH * min(few[d], COOP_MAX_GROUPS)
             return -(-size // COOP_WIDTH) * COOP_WIDTH   # else a work-item per ray
 
         def per_ray(k: dict, name: str, d: int, size: tuple) -> None:  # either flavour
