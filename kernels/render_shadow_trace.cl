@@ -89,13 +89,7 @@ render_shadow_trace_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Rend
     /* level depth - 1's shadow rays a group each only from coop_from on (coop_shadow) */
     shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
                      counts[depth - 1u], coop_shadow, shadow_radiance, caustic_map, &cprm, &coop);
-    const uint n = counts[depth];
-    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
-    TRACE_COOP_FOR(i, n, on) {
-        const Ray r = rays[i];
-        const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);
-        if (!on || get_local_id(0) == 0) hits[i] = h;
-    }
+    trace_rays_coop(SCENE_ARGS, rays, counts[depth], depth, hits, &coop);
 }
 
 __kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void
@@ -117,16 +111,7 @@ render_shadow_trace_shade_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     /* level depth - 1's shadow rays a group each only from coop_from on (coop_shadow) */
     shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
                      counts[depth - 1u], coop_shadow, shadow_radiance, caustic_map, &cprm, &coop);
-    const uint n = counts[depth];
-    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
-    TRACE_COOP_FOR(i, n, on) {
-        const Ray r = rays[i];
-        const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);
-        if (!on || get_local_id(0) == 0) {
-            hits[i] = h;
-            shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
-                      write_aov);
-        }
-    }
+    trace_shade_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, cam, rays, counts[depth], depth,
+                          hits, radiance, child_counts, aov, write_aov, &coop);
 }
 #endif

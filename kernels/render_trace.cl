@@ -38,20 +38,14 @@ __kernel void render_trace_shade(SCENE_PARAMS, RENDER_GEOM_PARAMS,
 }
 
 #if TRACE_COOP
-/* Grid strides over the work-groups: group g traces rays g, g + groups, ... with all its
- * work-items, the first of which writes the hit (and shades it). */
+/* A work-group per ray while the level has few, else a work-item per ray (render_trace.h
+ * trace_rays_coop, trace_shade_rays_coop). */
 __kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void render_trace_coop(
     SCENE_PARAMS, __global const Ray* restrict rays, __global const uint* restrict counts,
     const uint depth, __global Hit* restrict hits)
 {
     __local TraceCoop coop;
-    const uint n = counts[depth];
-    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
-    TRACE_COOP_FOR(i, n, on) {
-        const Ray r = rays[i];
-        const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);
-        if (!on || get_local_id(0) == 0) hits[i] = h;
-    }
+    trace_rays_coop(SCENE_ARGS, rays, counts[depth], depth, hits, &coop);
 }
 
 __kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void
@@ -63,16 +57,7 @@ render_trace_shade_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Rende
                         const uint write_aov)
 {
     __local TraceCoop coop;
-    const uint n = counts[depth];
-    const bool on = n <= TRACE_COOP_MAX_RAYS;   /* uniform: a group per ray while few */
-    TRACE_COOP_FOR(i, n, on) {
-        const Ray r = rays[i];
-        const Hit h = trace_ray(TRACE_COOP_IF_ARGS(&coop, on), &r, depth);
-        if (!on || get_local_id(0) == 0) {
-            hits[i] = h;
-            shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
-                      write_aov);
-        }
-    }
+    trace_shade_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, cam, rays, counts[depth], depth,
+                          hits, radiance, child_counts, aov, write_aov, &coop);
 }
 #endif
