@@ -120,7 +120,8 @@ def run(args) -> int:
         try:
             coop_from = int(coop_from)
         except ValueError:
-            coop_from = -1
+            raise InputError(f"--coop-from {coop_arg} is not a depth; allowed off or "
+                             f"[0, {MAX_DEPTH}]") from None
         if not 0 <= coop_from <= MAX_DEPTH:
             raise InputError(f"--coop-from {coop_arg} is out of range; allowed off or "
                              f"[0, {MAX_DEPTH}]")

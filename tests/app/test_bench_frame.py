@@ -88,3 +88,6 @@ def test_bench_frame_coop_from_is_recorded_and_checked(tmp_path, capsys):
     assert main(["bench", "frame", "--coop-from", "-1", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "--coop-from -1 is out of range; allowed off or [0, 32]" in err and "\n" not in err
+    assert main(["bench", "frame", "--coop-from", "x", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--coop-from x is not a depth; allowed off or [0, 32]" in err and "\n" not in err
