@@ -11,6 +11,7 @@ the default order.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import asdict, dataclass
 
 import pyopencl as cl
@@ -187,10 +188,22 @@ def list_devices() -> list[DeviceInfo]:
     return [describe(spec, p, d) for spec, p, d in _all_devices()]
 
 
+def pocl_version(platform: cl.Platform) -> tuple[int, int]:
+    """(major, minor) of a PoCL platform from its version string ("OpenCL 3.0 PoCL 3.1+debian
+    ..."); (0, 0) when it names none."""
+    m = re.search(r"PoCL (\d+)\.(\d+)", platform.version)
+    return (int(m.group(1)), int(m.group(2))) if m else (0, 0)
+
+
 def _default_order(candidates):
+    """GPUs first, then PoCL, newest PoCL first: where two are installed (pyopencl's wheel
+    bundles PoCL 3.0 with LLVM 14, whose compiler rejects CPUs newer than it, such as AMD
+    family 1Ah: "unknown target CPU 'generic'"; Debian's pocl-opencl-icd is PoCL 3.1 with
+    LLVM 15, which falls back to the CPU's features), the newer compiler knows more CPUs."""
     gpus = [c for c in candidates if c[2].type & cl.device_type.GPU]
     pocl = [c for c in candidates if "portable computing language" in c[1].name.lower()
             or "pocl" in c[1].name.lower()]
+    pocl.sort(key=lambda c: pocl_version(c[1]), reverse=True)   # stable: platform order next
     return gpus + pocl + [c for c in candidates if c not in gpus and c not in pocl]
 
 
