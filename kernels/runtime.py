@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import shlex
 import signal
 import sys
 import tempfile
@@ -121,6 +122,13 @@ def _source_hash() -> str:
     return h.hexdigest()[:12]
 
 
+def extra_build_options() -> list[str]:
+    """Compiler options added to every build from ``LBWATER_CL_OPTIONS`` (shell words), for
+    device experiments such as ``-cl-nv-verbose`` (NVIDIA: registers and spills in the build
+    log, bench/kernel_resources.py) or ``-cl-nv-maxrregcount=64``; empty when unset."""
+    return shlex.split(os.environ.get("LBWATER_CL_OPTIONS", ""))
+
+
 def _format_define(name: str, value) -> str:
     if value is None or value is True:
         return f"-D{name}"
@@ -195,7 +203,7 @@ class Runtime:
             options.append("-cl-kernel-arg-info")
         if "nvidia" in self.device.platform.name.lower():
             options.append("-DLBWATER_NVIDIA=1")  # common.h: DEVICE_FENCE
-        options += [_format_define(k, v) for k, v in key[1]]
+        options += [_format_define(k, v) for k, v in key[1]] + extra_build_options()
         text = f'#line 1 "{path.name}"\n' + path.read_text()
         try:
             # The source is handed over as a string, so a compiler resolves `#include "x.h"`
