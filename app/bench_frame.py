@@ -55,6 +55,9 @@ def add_arguments(p) -> None:
                         "32 (RenderSettings.coop_from: the latency-bound tail levels); off: one "
                         "ray per work-item everywhere; default: the device's choice (2 on a "
                         "GPU, off on a CPU)")
+    p.add_argument("--cost-bins", choices=("on", "off"), default=None,
+                   help="group each work-group's shadow rays by cost (RenderSettings.cost_bins: "
+                        "whole warps of crossing rays); default: the device's choice (on a GPU)")
     p.add_argument("--host-copy", action="store_true",
                    help="copy each image out of the pinned read-back array and check its pixels "
                         "inside the timed loop (the cost a read_frame() caller adds)")
@@ -135,6 +138,9 @@ def run(args) -> int:
         world.renderer.set_overlap(not getattr(args, "no_overlap", False), overlap_from)
         if coop_arg is not None:
             world.renderer.set_coop(coop_from)
+        bins_arg = getattr(args, "cost_bins", None)
+        if bins_arg is not None:
+            world.renderer.set_cost_bins(bins_arg == "on")
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -180,6 +186,7 @@ def run(args) -> int:
                "overlap": world.renderer.settings.overlap_levels,
                "overlap_from": world.renderer.settings.overlap_from,
                "coop_from": world.renderer.settings.coop_from,
+               "cost_bins": world.renderer.settings.cost_bins,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,
                "rays_per_depth": " ".join(str(n) for n in st.rays_per_depth),

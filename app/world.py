@@ -137,7 +137,7 @@ class World:
         from app.assemble import assemble, caustic_settings, render_settings
         from app.scene import Scene, load_scene
         from kernels import get_runtime
-        from raytrace.render import Renderer, device_coop_from
+        from raytrace.render import Renderer, device_coop_from, device_cost_bins
         from raytrace.render_types import STATS_LEN
 
         if isinstance(scene, str | Path):
@@ -158,7 +158,7 @@ class World:
         self.rebuild_water_bvh = bool(rebuild_water_bvh)
         self.renderer = Renderer(self.rt, self.render_scene, render_settings(
             scene, width=width, height=height, spp=spp, bounces=bounces, aov=aov, seed=seed,
-            coop_from=device_coop_from(self.rt)))
+            coop_from=device_coop_from(self.rt), cost_bins=device_cost_bins(self.rt)))
         self._caustic_box = a.caustic_box
         self._caustics = None           # raytrace.caustics.Caustics, made when first turned on
         self.set_caustics(caustic_settings(scene).mode if caustics is None else caustics)

@@ -6,6 +6,7 @@
  * (traverse_coop.h; RenderSettings.coop_from). */
 #include "common.h"
 #include "render_surface.h"
+#include "render_bins.h"
 #include "render_shadow.h"
 
 __kernel void render_shade(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
@@ -32,6 +33,28 @@ __kernel void render_shadow(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const R
     for (uint i = get_global_id(0); i < n; i += get_global_size(0))
         shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, i, radiance,
                    caustic_map, &cprm);
+}
+
+/* The same, each round's entries taken by the work-items in the order of their cost class
+ * (render_bins.h; RenderSettings.cost_bins): the same bytes. */
+__kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void render_shadow_binned(
+    SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+    __global const Light* restrict lights, __global const Ray* restrict rays,
+    __global const Hit* restrict hits, __global const uint* counts, const uint depth,
+    __global float4* restrict radiance, __global const float4* restrict caustic_map,
+    const CausticParams cprm)
+{
+    __local RenderBins bins;
+    const uint n = counts[depth];
+    for (uint base = get_group_id(0) * RENDER_BIN_WG; base < n;
+         base += get_num_groups(0) * RENDER_BIN_WG) {   /* uniform over the work-group */
+        const uint j = base + get_local_id(0);
+        const uint cls = j < n ? shadow_cost_class(prm, rays, hits, j, &cprm) : RENDER_BIN_IDLE;
+        const uint i = bin_round(&bins, j, cls);
+        if (i < n)
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, i,
+                       radiance, caustic_map, &cprm);
+    }
 }
 
 #if TRACE_COOP

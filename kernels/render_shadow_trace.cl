@@ -12,6 +12,7 @@
  * (traverse_coop.h; RenderSettings.coop_from), and level depth - 1's shadow rays too when
  * coop_shadow, else one per work-item first (level coop_from - 1 is not a tail level). */
 #include "common.h"
+#include "render_bins.h"
 #include "render_shadow.h"
 #include "render_surface.h"
 #include "render_trace.h"
@@ -68,6 +69,76 @@ __kernel void render_shadow_trace_shade(SCENE_PARAMS, RENDER_GEOM_PARAMS,
             const Hit h = trace_ray(TRACE_SERIAL_ARGS, &r, depth);
             hits[i] = h;
             shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
+                      write_aov);
+        }
+    }
+}
+
+/* The two above with each round's entries taken in the order of their cost class (render_bins.h;
+ * RenderSettings.cost_bins: level depth - 1's crossing shadow rays, its other shadow rays, level
+ * depth's traces, none): the same bytes. */
+__kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void
+render_shadow_trace_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                           __global const Light* restrict lights,
+                           __global const uint* restrict counts, const uint depth,
+                           __global const Ray* restrict shadow_rays,
+                           __global const Hit* restrict shadow_hits,
+                           __global float4* restrict shadow_radiance,
+                           __global const float4* restrict caustic_map, const CausticParams cprm,
+                           __global const Ray* restrict rays, __global Hit* restrict hits)
+{
+    __local RenderBins bins;
+    const uint n_shadow = counts[depth - 1u], n = n_shadow + counts[depth];
+    for (uint base = get_group_id(0) * RENDER_BIN_WG; base < n;
+         base += get_num_groups(0) * RENDER_BIN_WG) {   /* uniform over the work-group */
+        const uint j = base + get_local_id(0);
+        const uint cls = j >= n ? RENDER_BIN_IDLE : j >= n_shadow ? RENDER_BIN_TRACE
+                         : shadow_cost_class(prm, shadow_rays, shadow_hits, j, &cprm);
+        const uint i = bin_round(&bins, j, cls);
+        if (i >= n) continue;
+        if (i < n_shadow) {
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
+                       i, shadow_radiance, caustic_map, &cprm);
+        } else {
+            const Ray r = rays[i - n_shadow];
+            hits[i - n_shadow] = trace_ray(TRACE_SERIAL_ARGS, &r, depth);
+        }
+    }
+}
+
+__kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void
+render_shadow_trace_shade_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS,
+                                 __constant const RenderParams* prm,
+                                 __global const Light* restrict lights,
+                                 __global const uint* restrict counts, const uint depth,
+                                 __global const Ray* restrict shadow_rays,
+                                 __global const Hit* restrict shadow_hits,
+                                 __global float4* restrict shadow_radiance,
+                                 __global const float4* restrict caustic_map,
+                                 const CausticParams cprm, __constant const Camera* cam,
+                                 __global const Ray* restrict rays, __global Hit* restrict hits,
+                                 __global float4* restrict radiance,
+                                 __global uint* restrict child_counts,
+                                 __global Aov* restrict aov, const uint write_aov)
+{
+    __local RenderBins bins;
+    const uint n_shadow = counts[depth - 1u], n = n_shadow + counts[depth];
+    for (uint base = get_group_id(0) * RENDER_BIN_WG; base < n;
+         base += get_num_groups(0) * RENDER_BIN_WG) {   /* uniform over the work-group */
+        const uint j = base + get_local_id(0);
+        const uint cls = j >= n ? RENDER_BIN_IDLE : j >= n_shadow ? RENDER_BIN_TRACE
+                         : shadow_cost_class(prm, shadow_rays, shadow_hits, j, &cprm);
+        const uint i = bin_round(&bins, j, cls);
+        if (i >= n) continue;
+        if (i < n_shadow) {
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
+                       i, shadow_radiance, caustic_map, &cprm);
+        } else {
+            const uint t = i - n_shadow;
+            const Ray r = rays[t];
+            const Hit h = trace_ray(TRACE_SERIAL_ARGS, &r, depth);
+            hits[t] = h;
+            shade_hit(RENDER_GEOM_ARGS, prm, cam, r, h, t, depth, radiance, child_counts, aov,
                       write_aov);
         }
     }

@@ -130,6 +130,10 @@ class RenderSettings:
     coop_from: int | None = None  #: the first level d whose trace and shadow rays may be
                                   #: traversed one per work-group of 32 while few (at most
                                   #: COOP_MAX_RAYS; kernels/traverse_coop.h); None: never
+    cost_bins: bool = False       #: the shadow and trace launches of levels of many rays
+                                  #: hand each work-group's rays to its work-items grouped by
+                                  #: cost (kernels/render_bins.h: whole warps of rays that
+                                  #: cross the water); the same image
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -181,6 +185,28 @@ def device_coop_from(rt: Runtime) -> int | None:
     binary BVH layout; None elsewhere (a CPU runs one work-item per core: a 32-wide group
     would trace each ray 32 times over)."""
     return GPU_COOP_FROM if rt.is_gpu and rt.bvh_layout == "binary" else None
+
+
+#: Fewest work-items a level's per-ray launches take when the last counts size them: a count
+#: that jumps past it in one frame (a camera cut) costs that frame a few grid-stride rounds,
+#: and the tail levels' launches of a few hundred rays cost a bare launch (1/8 of the slots, the
+#: floor before, was 1M work-items at 1080p: 0.01-0.03 ms a launch on the H200).
+LAUNCH_FLOOR = 1 << 16
+
+#: Work-items per work-group of the binned shadow kernels (kernels/render_bins.h RENDER_BIN_WG).
+BIN_WG = 256
+#: With ``cost_bins``, the levels from depth 1 whose shadow rays are binned: those whose last
+#: count is at least this (about one wave of the H200's 132 x 2048 work-items), or all when no
+#: count has arrived. On the H200 the pool's level 1 (958k shadow rays, half of them crossing
+#: the water) took 0.61 instead of 0.88 ms binned, while level 0 (2M hits of one kind) and the
+#: tail levels of 4k-50k rays were 5-15% slower binned (BENCHMARKS.md, 2026-12-02).
+BIN_MIN_RAYS = 1 << 18
+
+
+def device_cost_bins(rt: Runtime) -> bool:
+    """``cost_bins`` on ``rt``'s device: on a GPU, whose warps run as long as their costliest
+    lane; off on a CPU (a work-item per core: nothing to regroup)."""
+    return bool(rt.is_gpu)
 
 
 def jitter_cols(spp: int) -> int:
@@ -312,8 +338,9 @@ class Renderer:
         """Per depth level: (rays work-items, scan size, gather size over rays, tonemap size over
         the chunk's pixels). The per-ray kernels loop with a grid stride over the device-side count,
         so any size is correct; with the last frame's counts (one chunk) a level is launched
-        for 5/4 of them (at least 1/8 of its slots) instead of all its slots, which are mostly
-        empty past depth 0 (reflections and refractions double the slots, not the rays)."""
+        for 5/4 of them (at least :data:`LAUNCH_FLOOR` work-items, or 1/8 of its slots if fewer)
+        instead of all its slots, which are mostly empty past depth 0 (reflections and
+        refractions double the slots, not the rays)."""
         key = (id(depths), hint)
         sizes = self._sizes.get(key)
         if sizes is None:
@@ -322,7 +349,7 @@ class Renderer:
             for d, (slots, scan, pixels) in enumerate(depths):
                 n = slots
                 if d > 0 and hint is not None and d < len(hint):
-                    want = max(hint[d] * 5 // 4 + ls, slots // 8)
+                    want = max(hint[d] * 5 // 4 + ls, min(slots // 8, LAUNCH_FLOOR))
                     n = min(slots, -(-want // ls) * ls)
                 sizes.append(((n,), scan, (n,), (pixels,)))
             if len(self._sizes) > 64:
@@ -377,6 +404,15 @@ class Renderer:
         self.settings = new
         self._bound_sig = None  # rebind: the cooperative kernels of these levels
 
+    def set_cost_bins(self, on: bool) -> None:
+        """Group each work-group's shadow rays by cost (``cost_bins``) from the next frame on;
+        an A/B switch (bench frame --cost-bins on|off). The same image either way."""
+        new = dataclasses.replace(self.settings, cost_bins=bool(on))
+        if new == self.settings:
+            return
+        self.settings = new
+        self._bound_sig = None  # rebind: the binned kernels
+
     def set_stage_per_depth(self, on: bool = True) -> None:
         """Time each depth level's trace, shade, shadow, scan and gather under its own stage
         (``render.shadow.d3``), e.g. to see the tail levels of few rays (bench frame
@@ -423,6 +459,19 @@ class Renderer:
                         "render_shadow_trace.cl", "render_shadow_trace_shade",
                         stage=self._stage_name("render.shadow_trace", d))
                     self._bound_sig = None
+        if s.cost_bins:   # the shadow launches with their rays grouped by cost
+            for d, ks in enumerate(self._k):
+                names = [("shadow", "render_shade.cl", "render_shadow"),
+                         ("trace", "render_trace.cl", "render_trace")]
+                if d > 0 and s.overlap_levels:
+                    names += [("shadow_trace", "render_shadow_trace.cl", "render_shadow_trace"),
+                              ("shadow_trace_shade", "render_shadow_trace.cl",
+                               "render_shadow_trace_shade")]
+                for key, source, name in names:
+                    if key + "_binned" not in ks:
+                        ks[key + "_binned"] = rt.kernel_launcher(
+                            source, name + "_binned", stage=ks[key].stage)
+                        self._bound_sig = None
         if s.coop_from is not None:   # the cooperative flavours of the levels from coop_from
             # on a CPU the serial walk per work-item (kernels/traverse_coop.h TRACE_COOP_SERIAL:
             # PoCL compiles the walk inside these kernels for minutes; the hits are the same)
@@ -465,6 +514,8 @@ class Renderer:
             wave = {"rays": self.rays[d % 2], "counts": self.counts, "depth": d}
             hits, radiance = self.hits[d % 2], self.radiance[d % 2]
             k["trace"].bind(**scene, **wave, hits=hits)
+            if "trace_binned" in k:
+                k["trace_binned"].bind(**scene, **wave, hits=hits)
             out = {"radiance": radiance, "child_counts": self.child, "aov": self.aov,
                    "write_aov": int(s.aov)}
             k["shade"].bind(**shading, cam=self.camera_buf, **wave, hits=hits, **out)
@@ -473,6 +524,9 @@ class Renderer:
             light = {"lights": self.scene.light_buf, "caustic_map": self.caustic_map,
                      "cprm": self.caustic_params}
             k["shadow"].bind(**scene, **shading, **light, **wave, hits=hits, radiance=radiance)
+            if "shadow_binned" in k:
+                k["shadow_binned"].bind(**scene, **shading, **light, **wave, hits=hits,
+                                        radiance=radiance)
             if "shadow_trace" in k:   # level d - 1's shadow rays, level d's trace (and shade)
                 last = {"shadow_rays": self.rays[(d - 1) % 2],
                         "shadow_hits": self.hits[(d - 1) % 2],
@@ -480,6 +534,12 @@ class Renderer:
                 k["shadow_trace"].bind(**scene, **shading, **light, **last, **wave, hits=hits)
                 k["shadow_trace_shade"].bind(**scene, **shading, **light, **last,
                                              cam=self.camera_buf, **wave, hits=hits, **out)
+            if "shadow_trace_binned" in k:
+                k["shadow_trace_binned"].bind(**scene, **shading, **light, **last, **wave,
+                                              hits=hits)
+                k["shadow_trace_shade_binned"].bind(**scene, **shading, **light, **last,
+                                                    cam=self.camera_buf, **wave, hits=hits,
+                                                    **out)
             if "trace_coop" in k:   # the cooperative flavours: the same arguments
                 k["trace_coop"].bind(**scene, **wave, hits=hits)
                 k["trace_shade_coop"].bind(**scene, **shading, cam=self.camera_buf, **wave,
@@ -585,13 +645,18 @@ class Renderer:
                     or d < s.coop_from or hint[d] > COOP_MAX_RAYS
                     else 1 << max(0, int(hint[d]) - 1).bit_length()
                     for d in range(deepest + 1))
+        # levels of many rays by the last counts (all from depth 1 with none): their shadow
+        # rays grouped by cost in each work-group (cost_bins)
+        bins = tuple(s.cost_bins and d >= 1 and (hint is None or d >= len(hint)
+                                                 or hint[d] >= BIN_MIN_RAYS)
+                     for d in range(deepest + 1))
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
-               s.overlap_levels, s.overlap_from, few, self._bind_version)
+               s.overlap_levels, s.overlap_from, few, bins, self._bind_version)
         ops = self._plans.get(key)
         if ops is None:
             if len(self._plans) >= 16:
                 self._plans.clear()
-            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few)
+            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few, bins)
         self._run(ops, rebind=len(self._plan) > 1 or ops is not self._last_ops)
         self._last_ops = ops
         old = self._stats_handle
@@ -603,11 +668,13 @@ class Renderer:
     #: (Kernel, {name: value}; with one chunk only when the plan changes) and a flush.
     _LAUNCH, _BIND, _FLUSH = 0, 1, 2
 
-    def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool, few: tuple) -> list:
+    def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool, few: tuple,
+                   bins: tuple) -> list:
         """The frame's launches in order, sizes and arguments decided: what the per-frame loop
-        did, made once per (sizes, depth, lights, stage names, levels of few rays, bindings).
-        ``few[d]``: where level d's rays go one per work-group, the power of two at or above its
-        last ray count (its work-groups), else None."""
+        did, made once per (sizes, depth, lights, stage names, levels of few rays, binned
+        levels, bindings). ``few[d]``: where level d's rays go one per work-group, the power of
+        two at or above its last ray count (its work-groups), else None; ``bins[d]``: level d's
+        shadow rays go through the binned kernels."""
         s, ks = self.settings, self._k
         ls, scan_ls = (s.local_size,), (SCAN_WG,)
         ops = []
@@ -634,9 +701,14 @@ class Renderer:
                 return COOP_WIDTH * min(few[d], COOP_MAX_GROUPS)
             return -(-size // COOP_WIDTH) * COOP_WIDTH   # else a work-item per ray
 
-        def per_ray(k: dict, name: str, d: int, size: tuple) -> None:  # either flavour
+        def binned(d: int) -> bool:   # level d's shadow rays grouped by cost (the same hits)
+            return bins[d]
+
+        def per_ray(k: dict, name: str, d: int, size: tuple) -> None:  # any flavour
             if coop(d):
                 launch(k[name + "_coop"], (coop_size(d, size[0]),), (COOP_WIDTH,))
+            elif binned(d) and name + "_binned" in k:
+                launch(k[name + "_binned"], (-(-size[0] // BIN_WG) * BIN_WG,), (BIN_WG,))
             else:
                 launch(k[name], size, ls)
 
@@ -673,7 +745,8 @@ class Renderer:
                 launch(k["scan"], scan_size, scan_ls)
                 bind(k["scatter"], gp=g_scatter)
                 launch(k["scatter"], scatter_size, ls)
-                if has_lights and coop(depth + 1) and (coop(depth) or depth < s.coop_from):
+                if has_lights and coop(depth + 1) and (coop(depth) or (
+                        depth < s.coop_from and not binned(depth))):
                     # a group per ray of level d + 1 and of level d's shadow rays (coop(d)), or
                     # a work-item per shadow ray of a level before coop_from (the pool's level
                     # 1: as fast as the plain kernel on the H200); not for the shadow rays of a
@@ -683,7 +756,12 @@ class Renderer:
                            (max(coop_size(depth + 1, next_size[0]),
                                 coop_size(depth, ray_size[0])),), (COOP_WIDTH,))
                 elif has_lights:
-                    launch(nxt["shadow_" + trace], (ray_size[0] + next_size[0],), ls)
+                    both = ray_size[0] + next_size[0]
+                    if binned(depth):
+                        launch(nxt["shadow_" + trace + "_binned"],
+                               (-(-both // BIN_WG) * BIN_WG,), (BIN_WG,))
+                    else:
+                        launch(nxt["shadow_" + trace], (both,), ls)
                 else:
                     per_ray(nxt, trace, depth + 1, next_size)
                 bind(k["gather"], gp=g_accumulate)
@@ -716,7 +794,8 @@ class Renderer:
             return
         for k in self._k:
             for name in ("shadow", "shadow_trace", "shadow_trace_shade", "shadow_coop",
-                         "shadow_trace_coop", "shadow_trace_shade_coop"):
+                         "shadow_trace_coop", "shadow_trace_shade_coop", "shadow_binned",
+                         "shadow_trace_binned", "shadow_trace_shade_binned"):
                 if name in k:
                     k[name].bind(caustic_map=cmap, cprm=self.caustic_params)
         self._caustic_bound = (cmap, cprm, self._bind_version)

@@ -135,8 +135,8 @@ def test_plan_picks_the_cooperative_kernels_by_the_last_counts(binary_rt):  # no
     r, *_ = frame(rt, build(rt, 2), RenderSettings(width=16, height=12, bounces=3, coop_from=2))
     sizes = tuple(r._launch_sizes(depths, None) for *_, depths in r._plan)
 
-    def kernels(few):
-        return [op[1].function_name for op in r._make_plan(sizes, 3, True, few)
+    def kernels(few, bins=(False,) * 4):
+        return [op[1].function_name for op in r._make_plan(sizes, 3, True, few, bins)
                 if op[0] == r._LAUNCH]
 
     assert not any(n.endswith("_coop") for n in kernels((None,) * 4))
@@ -146,3 +146,9 @@ def test_plan_picks_the_cooperative_kernels_by_the_last_counts(binary_rt):  # no
     assert "render_shadow_trace_coop" not in tail and "render_shadow_coop" in tail
     first = kernels((None, None, 90, None))   # S1+T2 cooperative (level 1 is before coop_from)
     assert first.count("render_shadow_trace_coop") == 1 and "render_shadow_coop" not in first
+    # unless level 1's shadow rays are binned (cost_bins, many rays): then S1+T2 binned
+    r.set_cost_bins(True)
+    r._bind(3)
+    binned = kernels((None, None, 90, None), (False, True, False, False))
+    assert "render_shadow_trace_coop" not in binned
+    assert binned.count("render_shadow_trace_binned") == 1

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-02" rows. Usage:
+#   bench/h200_session4.sh OUTDIR PART
+# PART baseline: kernel resources (registers, spills) and the frame per depth as it stands, with
+#   the register cap and real-time water as A/Bs; PART binned: the shadow rays binned by cost
+#   (RenderSettings.shadow_bins) against unbinned, and the tail launch sizes; PART final: the
+#   tables of BENCHMARKS.md. One device call each, a few minutes. The device machine needs the
+#   OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+set -uo pipefail
+out=${1:?OUTDIR}
+part=${2:?PART}
+mkdir -p "$out"
+lb() { python3 -m app.cli "$@"; }
+f="--cells 1024 --size 1920 1080 --frames 40"
+k="--cells 1024 --size 3840 2160 --frames 20"
+static="--scene bench/scenes/pool_static_boat.toml"
+case $part in
+baseline)
+    python3 bench/kernel_resources.py --out "$out/resources.json" 2>&1 | grep -E "render|caustics" \
+        | awk '{print $1, $2, $3, $5, $7, $9}' | head -40
+    lb bench frame $f $static --per-depth --out "$out/static_pd" | tail -1
+    lb bench frame $f --per-depth --out "$out/pool_pd" | tail -1
+    for r in 64 96; do
+        LBWATER_CL_OPTIONS="-cl-nv-maxrregcount=$r" lb bench frame $f $static --per-depth \
+            --out "$out/static_pd_r$r" | tail -1
+    done
+    lb bench frame $f $static --frame-time 0.0025 --out "$out/static_rt" | tail -1
+    lb bench frame $f --frame-time 0.0025 --out "$out/pool_rt" | tail -1
+    ;;
+binned)
+    timeout 200 python3 -m pytest -q -p no:cacheprovider -rs tests/raytrace/test_render_bins.py \
+        tests/raytrace/test_render_coop.py tests/raytrace/test_render_overlap.py \
+        tests/raytrace/test_render_plans.py 2>&1 | tail -3
+    for b in on off; do
+        lb bench frame $f $static --per-depth --cost-bins $b --out "$out/static_pd_bins$b" | tail -1
+        lb bench frame $f --per-depth --cost-bins $b --out "$out/pool_pd_bins$b" | tail -1
+    done
+    lb bench frame $f $static --cost-bins on --coop-from off --out "$out/static_bins_coopoff" \
+        | tail -1
+    lb bench frame $f $static --out "$out/static" | tail -1
+    lb bench frame $f --out "$out/pool" | tail -1
+    lb bench frame $k --out "$out/pool4k" | tail -1
+    ;;
+*) echo "unknown part $part"; exit 2 ;;
+esac
+exit 0
