@@ -35,11 +35,14 @@ binned)
         lb bench frame $f $static --per-depth --cost-bins $b --out "$out/static_pd_bins$b" | tail -1
         lb bench frame $f --per-depth --cost-bins $b --out "$out/pool_pd_bins$b" | tail -1
     done
-    lb bench frame $f $static --cost-bins on --coop-from off --out "$out/static_bins_coopoff" \
-        | tail -1
-    lb bench frame $f $static --out "$out/static" | tail -1
-    lb bench frame $f --out "$out/pool" | tail -1
+    for rep in 1 2; do
+        lb bench frame $f $static --out "$out/static_$rep" | tail -1
+        lb bench frame $f --out "$out/pool_$rep" | tail -1
+    done
+    lb bench frame $k $static --out "$out/static4k" | tail -1
     lb bench frame $k --out "$out/pool4k" | tail -1
+    lb bench frame $f $static --frame-time 0.0025 --out "$out/static_rt" | tail -1
+    lb bench frame $f --frame-time 0.0025 --out "$out/pool_rt" | tail -1
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
