@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-02" rows. Usage:
 #   bench/h200_session4.sh OUTDIR PART
-# PART baseline: kernel resources (registers, spills) and the frame per depth as it stands, with
-#   the register cap and real-time water as A/Bs; PART binned: the shadow rays binned by cost
-#   (RenderSettings.shadow_bins) against unbinned, and the tail launch sizes; PART final: the
-#   tables of BENCHMARKS.md. One device call each, a few minutes. The device machine needs the
-#   OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+# PART baseline (at 823890e): kernel resources (registers, spills) and the frame per depth as it
+#   stood, with the register cap and real-time water as A/Bs; PART final: the device tests of
+#   the binned kernels, the shadow rays binned by cost (RenderSettings.cost_bins) against
+#   unbinned per depth, and the tables of BENCHMARKS.md. One device call each, 1-2 minutes. The
+#   device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
 part=${2:?PART}
@@ -27,7 +27,7 @@ baseline)
     lb bench frame $f $static --frame-time 0.0025 --out "$out/static_rt" | tail -1
     lb bench frame $f --frame-time 0.0025 --out "$out/pool_rt" | tail -1
     ;;
-binned)
+final)
     timeout 200 python3 -m pytest -q -p no:cacheprovider -rs tests/raytrace/test_render_bins.py \
         tests/raytrace/test_render_coop.py tests/raytrace/test_render_overlap.py \
         tests/raytrace/test_render_plans.py 2>&1 | tail -3

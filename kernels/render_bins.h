@@ -68,14 +68,4 @@ inline uint shadow_cost_class(__constant const RenderParams* prm,
     return RENDER_BIN_CROSSING;
 }
 
-/* The cost class of closest-hit ray i of a secondary level (render_trace_binned): rays inside a
- * dielectric (refracted into the water: down to the floor) apart from rays in air (reflected:
- * mostly up into the sky, a short walk), dead padding rays idle. */
-inline uint trace_cost_class(__global const Ray* restrict rays, const uint i)
-{
-    const Ray r = rays[i];
-    if (!(r.wr + r.wg + r.wb > 0.0f)) return RENDER_BIN_IDLE;
-    return r.medium >= 0 ? RENDER_BIN_CROSSING : RENDER_BIN_TRACE;
-}
-
 #endif

@@ -4,7 +4,6 @@
  * TRACE_COOP=1, also the *_coop kernels: one ray per work-group of TRACE_COOP_WIDTH traversed
  * together (traverse_coop.h), for the latency-bound tail levels (RenderSettings.coop_from). */
 #include "common.h"
-#include "render_bins.h"
 #include "render_surface.h"
 #include "render_trace.h"
 
@@ -15,25 +14,6 @@ __kernel void render_trace(SCENE_PARAMS, __global const Ray* restrict rays,
 {
     const uint n = counts[depth];
     for (uint i = get_global_id(0); i < n; i += get_global_size(0)) {
-        const Ray r = rays[i];
-        hits[i] = trace_ray(TRACE_SERIAL_ARGS, &r, depth);
-    }
-}
-
-/* The same, each round's rays taken by the work-items grouped by cost (render_bins.h
- * trace_cost_class; RenderSettings.cost_bins, the secondary levels of many rays): the same
- * hits. */
-__kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void render_trace_binned(
-    SCENE_PARAMS, __global const Ray* restrict rays, __global const uint* restrict counts,
-    const uint depth, __global Hit* restrict hits)
-{
-    __local RenderBins bins;
-    const uint n = counts[depth];
-    for (uint base = get_group_id(0) * RENDER_BIN_WG; base < n;
-         base += get_num_groups(0) * RENDER_BIN_WG) {   /* uniform over the work-group */
-        const uint j = base + get_local_id(0);
-        const uint i = bin_round(&bins, j, j < n ? trace_cost_class(rays, j) : RENDER_BIN_IDLE);
-        if (i >= n) continue;
         const Ray r = rays[i];
         hits[i] = trace_ray(TRACE_SERIAL_ARGS, &r, depth);
     }

@@ -130,9 +130,9 @@ class RenderSettings:
     coop_from: int | None = None  #: the first level d whose trace and shadow rays may be
                                   #: traversed one per work-group of 32 while few (at most
                                   #: COOP_MAX_RAYS; kernels/traverse_coop.h); None: never
-    cost_bins: bool = False       #: the shadow and trace launches of levels of many rays
-                                  #: hand each work-group's rays to its work-items grouped by
-                                  #: cost (kernels/render_bins.h: whole warps of rays that
+    cost_bins: bool = False       #: the shadow launches of levels of many rays hand each
+                                  #: work-group's rays to its work-items grouped by cost
+                                  #: (kernels/render_bins.h: whole warps of shadow rays that
                                   #: cross the water); the same image
 
     def resolved(self) -> RenderSettings:
@@ -199,7 +199,8 @@ BIN_WG = 256
 #: count is at least this (about one wave of the H200's 132 x 2048 work-items), or all when no
 #: count has arrived. On the H200 the pool's level 1 (958k shadow rays, half of them crossing
 #: the water) took 0.61 instead of 0.88 ms binned, while level 0 (2M hits of one kind) and the
-#: tail levels of 4k-50k rays were 5-15% slower binned (BENCHMARKS.md, 2026-12-02).
+#: tail levels of 4k-50k rays were 5-15% slower binned (BENCHMARKS.md, 2026-12-02). The
+#: secondary trace binned the same way (refracted rays apart from reflected) was 3-6% slower.
 BIN_MIN_RAYS = 1 << 18
 
 
@@ -461,8 +462,7 @@ class Renderer:
                     self._bound_sig = None
         if s.cost_bins:   # the shadow launches with their rays grouped by cost
             for d, ks in enumerate(self._k):
-                names = [("shadow", "render_shade.cl", "render_shadow"),
-                         ("trace", "render_trace.cl", "render_trace")]
+                names = [("shadow", "render_shade.cl", "render_shadow")]
                 if d > 0 and s.overlap_levels:
                     names += [("shadow_trace", "render_shadow_trace.cl", "render_shadow_trace"),
                               ("shadow_trace_shade", "render_shadow_trace.cl",
@@ -514,8 +514,6 @@ class Renderer:
             wave = {"rays": self.rays[d % 2], "counts": self.counts, "depth": d}
             hits, radiance = self.hits[d % 2], self.radiance[d % 2]
             k["trace"].bind(**scene, **wave, hits=hits)
-            if "trace_binned" in k:
-                k["trace_binned"].bind(**scene, **wave, hits=hits)
             out = {"radiance": radiance, "child_counts": self.child, "aov": self.aov,
                    "write_aov": int(s.aov)}
             k["shade"].bind(**shading, cam=self.camera_buf, **wave, hits=hits, **out)
