@@ -4,7 +4,7 @@
 # PART baseline (at 823890e): kernel resources (registers, spills) and the frame per depth as it
 #   stood, with the register cap and real-time water as A/Bs; PART final: the device tests of
 #   the binned kernels, the shadow rays binned by cost (RenderSettings.cost_bins) against
-#   unbinned per depth, and the tables of BENCHMARKS.md. One device call each, 1-2 minutes. The
+#   unbinned per depth, and the tables of BENCHMARKS.md; PART rule: the combined launch's rule. One device call each, 1-2 minutes. The
 #   device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -43,6 +43,15 @@ final)
     lb bench frame $k --out "$out/pool4k" | tail -1
     lb bench frame $f $static --frame-time 0.0025 --out "$out/static_rt" | tail -1
     lb bench frame $f --frame-time 0.0025 --out "$out/pool_rt" | tail -1
+    ;;
+rule)   # a combined launch cooperative only when both its levels are few (cf4b1c5 on)
+    timeout 200 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_render_coop.py \
+        tests/raytrace/test_render_bins.py 2>&1 | tail -2
+    lb bench frame $f $static --per-depth --cost-bins off --out "$out/static_pd_binsoff" | tail -1
+    lb bench frame $f $static --per-depth --out "$out/static_pd" | tail -1
+    lb bench frame $f --per-depth --out "$out/pool_pd" | tail -1
+    lb bench frame $f $static --out "$out/static" | tail -1
+    lb bench frame $f --out "$out/pool" | tail -1
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac

@@ -743,13 +743,12 @@ class Renderer:
                 launch(k["scan"], scan_size, scan_ls)
                 bind(k["scatter"], gp=g_scatter)
                 launch(k["scatter"], scatter_size, ls)
-                if has_lights and coop(depth + 1) and (coop(depth) or (
-                        depth < s.coop_from and not binned(depth))):
-                    # a group per ray of level d + 1 and of level d's shadow rays (coop(d)), or
-                    # a work-item per shadow ray of a level before coop_from (the pool's level
-                    # 1: as fast as the plain kernel on the H200); not for the shadow rays of a
-                    # tail level of many rays beside few (4231 with 884: 0.25 against 0.21 ms
-                    # plain). The shadow part runs first
+                if has_lights and coop(depth + 1) and coop(depth):
+                    # a group per ray of level d + 1 and of level d's shadow rays, both few;
+                    # not for many shadow rays beside few traces, which the cooperative kernel
+                    # runs a work-item each slower than the plain one (on the H200 a tail
+                    # level's 4231 with 884: 0.25 against 0.21 ms; the static scene's level 1,
+                    # 958k beside 3404: 0.998 against 0.881). The shadow part runs first
                     launch(nxt["shadow_" + trace + "_coop"],
                            (max(coop_size(depth + 1, next_size[0]),
                                 coop_size(depth, ray_size[0])),), (COOP_WIDTH,))

@@ -129,8 +129,8 @@ def test_the_device_choice_is_cooperative_only_on_a_gpu_with_the_binary_layout(r
 
 def test_plan_picks_the_cooperative_kernels_by_the_last_counts(binary_rt):  # noqa: F811
     """Levels of few rays (their last counts, ``few``) take the cooperative kernels; a combined
-    launch of level d's shadow rays and level d + 1's trace takes them when both levels are few
-    or level d comes before coop_from, not for a tail level's many shadow rays beside few."""
+    launch of level d's shadow rays and level d + 1's trace takes them when both levels are
+    few, not for many shadow rays beside few traces."""
     rt = binary_rt
     r, *_ = frame(rt, build(rt, 2), RenderSettings(width=16, height=12, bounces=3, coop_from=2))
     sizes = tuple(r._launch_sizes(depths, None) for *_, depths in r._plan)
@@ -140,13 +140,15 @@ def test_plan_picks_the_cooperative_kernels_by_the_last_counts(binary_rt):  # no
                 if op[0] == r._LAUNCH]
 
     assert not any(n.endswith("_coop") for n in kernels((None,) * 4))
-    both = kernels((None, None, 90, 40))      # S1+T2, S2+T3 cooperative, S3 too
-    assert both.count("render_shadow_trace_coop") == 2 and "render_shadow_coop" in both
+    both = kernels((None, None, 90, 40))      # S2+T3 cooperative, S3 too; S1+T2 plain
+    assert both.count("render_shadow_trace_coop") == 1 and "render_shadow_coop" in both
+    assert both.count("render_shadow_trace") == 1
     tail = kernels((None, None, None, 40))    # level 2 many: S2+T3 plain, S3 cooperative
     assert "render_shadow_trace_coop" not in tail and "render_shadow_coop" in tail
-    first = kernels((None, None, 90, None))   # S1+T2 cooperative (level 1 is before coop_from)
-    assert first.count("render_shadow_trace_coop") == 1 and "render_shadow_coop" not in first
-    # unless level 1's shadow rays are binned (cost_bins, many rays): then S1+T2 binned
+    first = kernels((None, None, 90, None))   # level 1 many, level 2 few: S1+T2 plain
+    assert "render_shadow_trace_coop" not in first and "render_shadow_coop" not in first
+    assert first.count("render_shadow_trace") == 2   # S1+T2, S2+T3
+    # with level 1's shadow rays binned (cost_bins, many rays): S1+T2 binned
     r.set_cost_bins(True)
     r._bind(3)
     binned = kernels((None, None, 90, None), (False, True, False, False))
