@@ -44,7 +44,7 @@ final)
     lb bench frame $f $static --frame-time 0.0025 --out "$out/static_rt" | tail -1
     lb bench frame $f --frame-time 0.0025 --out "$out/pool_rt" | tail -1
     ;;
-rule)   # a combined launch cooperative only when both its levels are few (cf4b1c5 on)
+rule)   # a combined launch cooperative only when both its levels are few (694f4ab on)
     timeout 200 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_render_coop.py \
         tests/raytrace/test_render_bins.py 2>&1 | tail -2
     lb bench frame $f $static --per-depth --cost-bins off --out "$out/static_pd_binsoff" | tail -1
