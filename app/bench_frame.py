@@ -58,6 +58,9 @@ def add_arguments(p) -> None:
     p.add_argument("--cost-bins", choices=("on", "off"), default=None,
                    help="group each work-group's shadow rays by cost (RenderSettings.cost_bins: "
                         "whole warps of crossing rays); default: the device's choice (on a GPU)")
+    p.add_argument("--no-profiling", action="store_true",
+                   help="run on a queue without profiling (no per-stage times: wall and latency "
+                        "only), to see what the event timestamps cost")
     p.add_argument("--host-copy", action="store_true",
                    help="copy each image out of the pinned read-back array and check its pixels "
                         "inside the timed loop (the cost a read_frame() caller adds)")
@@ -129,6 +132,10 @@ def run(args) -> int:
             raise InputError(f"--coop-from {coop_arg} is out of range; allowed off or "
                              f"[0, {MAX_DEPTH}]")
     rt = get_runtime(args.device)
+    if getattr(args, "no_profiling", False):
+        from kernels.runtime import Runtime
+
+        rt = Runtime(rt.device, profiling=False, bvh_layout=rt.bvh_layout)
     rows = []
     for cells in args.cells:
         world = World(scene, rt, width=args.size[0], height=args.size[1], cells=cells,
@@ -150,14 +157,16 @@ def run(args) -> int:
             world.frame(args.frame_time)
             latency.append(time.perf_counter() - t0)
         # throughput: frames in flight (the next enqueued before the last image is read)
-        stages, steps = [], []
+        stages, steps, spans = [], [], []
 
         host_copy = bool(getattr(args, "host_copy", False))
 
-        def check(img, pixels, world=world, cells=cells, stages=stages, steps=steps):
+        def check(img, pixels, world=world, cells=cells, stages=stages, steps=steps,
+                  spans=spans):
             st = world.stats
             stages.append(st.stage_ms)
             steps.append(st.lbm_steps)
+            spans.append(st.device_span_ms)
             if st.guard["nan"] or (pixels and img[..., 3].min() != 255):
                 raise RuntimeError(f"bench frame: {cells} cells: bad frame "
                                    f"({st.guard['report']})")
@@ -194,13 +203,15 @@ def run(args) -> int:
                "latency_ms": round(statistics.median(latency) * 1e3, 3),
                "fps": round(1e3 / wall_ms, 1),
                "kernels_ms": round(sum(per_stage.values()), 3),
+               "device_span_ms": round(statistics.median(spans), 3),
+               "profiling": rt.timer.enabled,
                "device_mb": round(st.device_bytes / 2**20, 1),
                **{f"{k}_ms": round(v, 4) for k, v in per_stage.items()}}
         rows.append(row)
         print(f"{row['cells']:>10} cells, {row['lbm_steps_per_frame']:g} steps/frame, "
               f"{args.size[0]}x{args.size[1]}: "
-              f"{wall_ms:.2f} ms/frame ({row['fps']} FPS), kernels {row['kernels_ms']:.2f} ms",
-              flush=True)
+              f"{wall_ms:.2f} ms/frame ({row['fps']} FPS), kernels {row['kernels_ms']:.2f} ms, "
+              f"device span {row['device_span_ms']:.2f} ms", flush=True)
     out = Path(args.out)
     write_json(out / "bench_frame.json", rows)
     write_csv(out / "bench_frame.csv", rows)

@@ -54,6 +54,8 @@ class FrameStats:
     device_bytes: int                #: device memory held by this runtime's live buffers
     guard: dict                      #: what the water guard saw and did this frame
     water_cells: tuple | None        #: (nx, ny) of the water grid
+    device_span_ms: float = 0.0      #: device ms from the frame's first command's start to its
+                                     #: last one's end (kernel_ms + idle gaps between them)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,7 +173,8 @@ class World:
         self._drops: list = []
         self._pushes: list = []
         self._boat_moves: list = []
-        self._stage_ms: dict = {}       # frame index -> stage times, until its stats are made
+        self._stage_ms: dict = {}       # frame index -> (stage times, device span), until its
+                                        # stats are made
         self._stats: FrameStats | None = None
         self._picker = None
         from kernels.pinned import PinnedRing
@@ -603,20 +606,22 @@ class World:
         itself (``"view"``), or None (False)."""
         rgba = slot.image.wait()
         wall = (time.perf_counter() - slot.t0) * 1e3
-        for tag, ms in self.rt.timer.completed():
-            self._stage_ms[tag] = ms
+        timer = self.rt.timer
+        for tag, ms in timer.completed():
+            self._stage_ms[tag] = (ms, timer.take_span_ms(tag))
         f = slot.frame
-        stage_ms = self._stage_ms.pop(f.index, {})
+        stage_ms, span_ms = self._stage_ms.pop(f.index, ({}, 0.0))
         for old in [k for k in self._stage_ms if k < f.index]:
             del self._stage_ms[old]
         if not isinstance(rgba, np.ndarray):   # a frame of the shared display path
             keep_image = keep_image and "view"
         img = rgba.copy() if keep_image == "copy" else rgba if keep_image else None
-        self._stats = self._make_stats(slot, stage_ms, wall)
+        self._stats = self._make_stats(slot, stage_ms, wall, span_ms)
         self._free.append(slot)
         return img
 
-    def _make_stats(self, slot: _Slot, stage_ms: dict, wall_ms: float) -> FrameStats:
+    def _make_stats(self, slot: _Slot, stage_ms: dict, wall_ms: float,
+                    span_ms: float = 0.0) -> FrameStats:
         f = slot.frame
         per_depth = tuple(self.renderer.stats_from(slot.counts.wait())["rays_per_depth"])
         guard = {"nan": False, "acted": False, "report": "ok"}
@@ -634,7 +639,8 @@ class World:
             rays_per_depth=per_depth, n_rays=int(sum(per_depth)),
             n_triangles=self.render_scene.n_triangles,
             device_bytes=self._device_bytes(), guard=guard,
-            water_cells=None if self.sim is None else (self.sim.nx, self.sim.ny))
+            water_cells=None if self.sim is None else (self.sim.nx, self.sim.ny),
+            device_span_ms=span_ms)
 
     def _device_bytes(self) -> int:
         """Bytes of the device buffers the frame's objects hold (walked once, then cached until

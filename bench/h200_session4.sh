@@ -4,7 +4,9 @@
 # PART baseline (at 823890e): kernel resources (registers, spills) and the frame per depth as it
 #   stood, with the register cap and real-time water as A/Bs; PART final: the device tests of
 #   the binned kernels, the shadow rays binned by cost (RenderSettings.cost_bins) against
-#   unbinned per depth, and the tables of BENCHMARKS.md; PART rule: the combined launch's rule. One device call each, 1-2 minutes. The
+#   unbinned per depth, and the tables of BENCHMARKS.md; PART rule: the combined launch's rule;
+#   PART span: the device span of a frame against its kernels and wall, and a queue without
+#   profiling. One device call each, 1-2 minutes. The
 #   device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -52,6 +54,17 @@ rule)   # a combined launch cooperative only when both its levels are few (694f4
     lb bench frame $f --per-depth --out "$out/pool_pd" | tail -1
     lb bench frame $f $static --out "$out/static" | tail -1
     lb bench frame $f --out "$out/pool" | tail -1
+    ;;
+span)   # where the wall time above the kernels goes: the device span, a queue without profiling
+    for rep in 1 2; do
+        for sc in "$static" ""; do
+            n=$([ -n "$sc" ] && echo static || echo pool)
+            lb bench frame $f $sc --out "$out/${n}_$rep" | tail -1
+            lb bench frame $f $sc --no-profiling --out "$out/${n}_noprof_$rep" | tail -1
+        done
+    done
+    lb bench frame $k $static --out "$out/static4k" | tail -1
+    lb bench frame $k $static --no-profiling --out "$out/static4k_noprof" | tail -1
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac

@@ -20,12 +20,14 @@ _START, _END = cl.profiling_info.START, cl.profiling_info.END
 
 
 class _Frame:
-    __slots__ = ("events", "folded_ms", "tag")
+    __slots__ = ("events", "first_ns", "folded_ms", "last_ns", "tag")
 
     def __init__(self, tag):
         self.tag = tag
         self.events: list[tuple[str, cl.Event]] = []
         self.folded_ms: dict[str, float] = {}
+        self.first_ns: int | None = None   # the earliest start and latest end of its events
+        self.last_ns: int | None = None
 
     def fold(self, count: int, done: bool = False) -> None:
         """Keep only the per-stage sums of the oldest ``count`` events, waiting for the last of
@@ -36,13 +38,18 @@ class _Frame:
         if not done:
             events[-1][1].wait()
         ms, get = self.folded_ms, self.folded_ms.get
+        first, last = self.first_ns, self.last_ns
         for stage, evt in events:
+            info = evt.get_profiling_info
             try:
-                info = evt.get_profiling_info
-                t = (info(_END) - info(_START)) * 1e-6
+                start, end = info(_START), info(_END)
             except cl.Error:  # not complete after all (an event of another queue): wait
-                t = _event_ms(evt)
-            ms[stage] = get(stage, 0.0) + t
+                evt.wait()
+                start, end = info(_START), info(_END)
+            ms[stage] = get(stage, 0.0) + (end - start) * 1e-6
+            first = start if first is None or start < first else first
+            last = end if last is None or end > last else last
+        self.first_ns, self.last_ns = first, last
         del self.events[:count]
 
     def done(self) -> bool:
@@ -54,10 +61,12 @@ class _Frame:
         self.fold(len(self.events), done)
         return dict(self.folded_ms)
 
-
-def _event_ms(evt: cl.Event) -> float:
-    evt.wait()
-    return (evt.get_profiling_info(_END) - evt.get_profiling_info(_START)) * 1e-6
+    def span_ms(self) -> float:
+        """Device ms from its first command's start to its last one's end: its kernels' time
+        plus the device's idle time between them (0.0 with no events)."""
+        if self.first_ns is None:
+            return 0.0
+        return (self.last_ns - self.first_ns) * 1e-6
 
 
 class StageTimer:
@@ -69,6 +78,7 @@ class StageTimer:
         self._open = _Frame(None)
         self._closed: deque[_Frame] = deque()
         self._dropped: dict[str, float] = {}  # frames folded out of the ring, for collect()
+        self._spans: dict = {}   # tag -> span_ms of the frames completed() returned, until taken
 
     def record(self, stage: str, event: cl.Event) -> cl.Event:
         if self.enabled and event is not None:
@@ -98,7 +108,15 @@ class StageTimer:
         while self._closed and (wait or self._closed[0].done()):
             f = self._closed.popleft()
             out.append((f.tag, f.stage_ms(done=not wait)))
+            self._spans[f.tag] = f.span_ms()
+        while len(self._spans) > 4 * self.max_frames:   # tags nobody took
+            del self._spans[next(iter(self._spans))]
         return out
+
+    def take_span_ms(self, tag) -> float:
+        """The device span (:meth:`_Frame.span_ms`: first start to last end, gaps between its
+        commands included) of a frame :meth:`completed` returned; 0.0 when unknown."""
+        return self._spans.pop(tag, 0.0)
 
     def collect(self) -> dict[str, float]:
         """Milliseconds per stage summed over everything recorded since the last call (waits on
@@ -115,3 +133,4 @@ class StageTimer:
         self._open = _Frame(None)
         self._closed.clear()
         self._dropped = {}
+        self._spans = {}

@@ -109,6 +109,13 @@ def test_stage_times_are_the_sums_of_their_kernels_times(rt):
         for stage, e in evts:
             want[stage] = want.get(stage, 0.0) + (e.profile.end - e.profile.start) * 1e-6
         assert ms == want and set(ms) == {"a", "b"}
+    # each frame's device span: its first event's start to its last one's end (no overlap on
+    # one in-order queue, so at least the sum of its kernels' times)
+    for (tag, ms), evts in zip(got, frames, strict=True):
+        span = timer.take_span_ms(tag)
+        want = (max(e.profile.end for _, e in evts) - min(e.profile.start for _, e in evts)) * 1e-6
+        assert span == want and span >= sum(ms.values()) * (1 - 1e-9) > 0
+        assert timer.take_span_ms(tag) == 0.0   # taken once
     timer.record("a", cl.enqueue_nd_range_kernel(rt.queue, k.kernel, (256,), (16,)))
     timer.close_frame(3)
     assert set(timer.completed(wait=True)[0][1]) == {"a"}   # waited for the queued frame
