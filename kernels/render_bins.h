@@ -68,4 +68,16 @@ inline uint shadow_cost_class(__constant const RenderParams* prm,
     return RENDER_BIN_CROSSING;
 }
 
+/* The cost class of entry j of a combined launch (render_shadow_trace_binned): level
+ * depth - 1's n_shadow shadow rays first, then level depth's traces, up to n. */
+inline uint shadow_trace_cost_class(__constant const RenderParams* prm,
+                                    __global const Ray* restrict shadow_rays,
+                                    __global const Hit* restrict shadow_hits, const uint j,
+                                    const uint n_shadow, const uint n, const CausticParams* cp)
+{
+    if (j >= n) return RENDER_BIN_IDLE;
+    if (j >= n_shadow) return RENDER_BIN_TRACE;
+    return shadow_cost_class(prm, shadow_rays, shadow_hits, j, cp);
+}
+
 #endif

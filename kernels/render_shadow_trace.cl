@@ -92,9 +92,8 @@ render_shadow_trace_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Re
     for (uint base = get_group_id(0) * RENDER_BIN_WG; base < n;
          base += get_num_groups(0) * RENDER_BIN_WG) {   /* uniform over the work-group */
         const uint j = base + get_local_id(0);
-        const uint cls = j >= n ? RENDER_BIN_IDLE : j >= n_shadow ? RENDER_BIN_TRACE
-                         : shadow_cost_class(prm, shadow_rays, shadow_hits, j, &cprm);
-        const uint i = bin_round(&bins, j, cls);
+        const uint i = bin_round(&bins, j, shadow_trace_cost_class(prm, shadow_rays, shadow_hits,
+                                                                    j, n_shadow, n, &cprm));
         if (i >= n) continue;
         if (i < n_shadow) {
             shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
@@ -126,9 +125,8 @@ render_shadow_trace_shade_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     for (uint base = get_group_id(0) * RENDER_BIN_WG; base < n;
          base += get_num_groups(0) * RENDER_BIN_WG) {   /* uniform over the work-group */
         const uint j = base + get_local_id(0);
-        const uint cls = j >= n ? RENDER_BIN_IDLE : j >= n_shadow ? RENDER_BIN_TRACE
-                         : shadow_cost_class(prm, shadow_rays, shadow_hits, j, &cprm);
-        const uint i = bin_round(&bins, j, cls);
+        const uint i = bin_round(&bins, j, shadow_trace_cost_class(prm, shadow_rays, shadow_hits,
+                                                                    j, n_shadow, n, &cprm));
         if (i >= n) continue;
         if (i < n_shadow) {
             shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
