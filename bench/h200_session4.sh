@@ -6,7 +6,7 @@
 #   the binned kernels, the shadow rays binned by cost (RenderSettings.cost_bins) against
 #   unbinned per depth, and the tables of BENCHMARKS.md; PART rule: the combined launch's rule;
 #   PART span: the device span of a frame against its kernels and wall, and a queue without
-#   profiling. One device call each, 1-2 minutes. The
+#   profiling; PART check: the last commit's device tests and frames. One device call each, 1-2 minutes. The
 #   device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -65,6 +65,14 @@ span)   # where the wall time above the kernels goes: the device span, a queue w
     done
     lb bench frame $k $static --out "$out/static4k" | tail -1
     lb bench frame $k $static --no-profiling --out "$out/static4k_noprof" | tail -1
+    ;;
+check)  # the last commit's device tests and frames
+    timeout 200 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_render_bins.py \
+        tests/raytrace/test_render_coop.py tests/raytrace/test_render_overlap.py \
+        tests/kernels/test_runtime.py tests/app/test_frame_pipeline.py 2>&1 | tail -2
+    lb bench frame $f $static --out "$out/static" | tail -1
+    lb bench frame $f --out "$out/pool" | tail -1
+    lb bench frame $k $static --out "$out/static4k" | tail -1
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
