@@ -44,6 +44,12 @@ that kernel goes one ray per work-item if the device-side count is above it. Bot
 the same hit, ties included (of two triangles at one distance, the smaller instance and
 triangle ids: kernels/traverse.h ``trace_tie_wins``), so the choice never shows in the image.
 
+``cost_bins`` (``device_cost_bins``: on a GPU) sends the shadow rays of the levels from depth 1
+with at least ``BIN_MIN_RAYS`` rays by the last counts through the ``*_binned`` kernels
+(``kernels/render_bins.h``): each work-group of ``BIN_WG`` takes its rays grouped by cost class,
+so a warp's lanes do alike work (a water hit's refraction crosses the surface, its reflection
+mostly meets the sky); the same image.
+
 Five launches per depth level (four with ``fuse_trace_shade``: render.trace then includes
 the shading), either order. Every kernel (``kernels.launch.Kernel``) belongs to this renderer
 (one per depth level; the tonemap pass and the scatter alone have their own gather objects) and
