@@ -6,7 +6,8 @@
 #   the binned kernels, the shadow rays binned by cost (RenderSettings.cost_bins) against
 #   unbinned per depth, and the tables of BENCHMARKS.md; PART rule: the combined launch's rule;
 #   PART span: the device span of a frame against its kernels and wall, and a queue without
-#   profiling; PART check: the last commit's device tests and frames. One device call each, 1-2 minutes. The
+#   profiling; PART check: the last commit's device tests and frames; PART tail: what the
+#   deeper levels' rays are. One device call each, 1-2 minutes. The
 #   device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -73,6 +74,20 @@ check)  # the last commit's device tests and frames
     lb bench frame $f $static --out "$out/static" | tail -1
     lb bench frame $f --out "$out/pool" | tail -1
     lb bench frame $k $static --out "$out/static4k" | tail -1
+    ;;
+tail)   # what the deeper levels' rays are (bench/tail_rays.py), pool and static
+    python3 bench/tail_rays.py --out "$out/tail_pool.json" > /dev/null
+    python3 bench/tail_rays.py --scene bench/scenes/pool_static_boat.toml \
+        --out "$out/tail_static.json" > /dev/null
+    python3 -c "
+import json
+for n in ('pool', 'static'):
+    d = json.load(open('$out/tail_' + n + '.json'))
+    print(n, d['rays_per_depth'])
+    for k, v in d['levels'].items():
+        print(' ', k, v['rays'], {kk: (vv['rays'], round(vv['abs_dy_median'], 2),
+              vv['abs_dy_below_0.1'], vv['t_median'] and round(vv['t_median'], 2))
+              for kk, vv in v['kinds'].items()})"
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
