@@ -2,7 +2,8 @@
 or air, what they hit (instance name), how far, how steep, and with what weight; read back from
 the renderer's wavefront buffers after a frame (the last two levels, which the ping-pong buffers
 still hold: so each pair of levels from its own World with that many bounces, the levels before
-the deepest being the same whatever the bounces). Used to find out why the pool's tail levels cost ~0.2 ms each on the H200.
+the deepest being the same whatever the bounces). Used to find out why the pool's tail levels
+cost ~0.2 ms each on the H200.
 
     PYTHONPATH=$PWD python3 bench/tail_rays.py [--scene S] [--cells N] [--size W H] [--out F]
 """
