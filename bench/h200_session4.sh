@@ -7,7 +7,7 @@
 #   unbinned per depth, and the tables of BENCHMARKS.md; PART rule: the combined launch's rule;
 #   PART span: the device span of a frame against its kernels and wall, and a queue without
 #   profiling; PART check: the last commit's device tests and frames; PART tail: what the
-#   deeper levels' rays are. One device call each, 1-2 minutes. The
+#   deeper levels' rays are; PART coopmax: the cooperative kernels' ray limit. One device call each, 1-2 minutes. The
 #   device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -88,6 +88,21 @@ for n in ('pool', 'static'):
         print(' ', k, v['rays'], {kk: (vv['rays'], round(vv['abs_dy_median'], 2),
               vv['abs_dy_below_0.1'], vv['t_median'] and round(vv['t_median'], 2))
               for kk, vv in v['kinds'].items()})"
+    ;;
+coopmax)   # the cooperative kernels' ray limit (COOP_MAX_RAYS) 4096 against 8192 and 16384,
+           # each from a copy of the tree with both mirrors of the limit changed
+    for m in 4096 8192 16384; do
+        w=/tmp/coopmax$m
+        rm -rf $w && mkdir -p $w && cp -r app kernels lbm raytrace scenes bench $w/
+        sed -i "s/^COOP_MAX_RAYS = 4096/COOP_MAX_RAYS = $m/" $w/raytrace/query.py
+        sed -i "s/#define TRACE_COOP_MAX_RAYS 4096/#define TRACE_COOP_MAX_RAYS $m/" \
+            $w/kernels/traverse_coop.h
+        grep -c "COOP_MAX_RAYS = $m" $w/raytrace/query.py
+        (cd $w && PYTHONPATH=/tmp/site:$w python3 -m app.cli bench frame $f --per-depth \
+            --out "$out/pool_coopmax$m" | tail -1)
+        (cd $w && PYTHONPATH=/tmp/site:$w python3 -m app.cli bench frame $f $static \
+            --per-depth --out "$out/static_coopmax$m" | tail -1)
+    done
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
