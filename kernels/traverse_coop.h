@@ -74,10 +74,10 @@ typedef struct {
 #define TRACE_COOP_ARGS(scratch) SCENE_ARGS, (scratch), true
 #define TRACE_COOP_IF_ARGS(scratch, on) SCENE_ARGS, (scratch), (on)
 /* A level's rays are traversed one per work-group only while they are few: at most
-   TRACE_COOP_MAX_RAYS (the device-side count; raytrace.render.COOP_MAX_RAYS mirrors it). Above
-   it (the H200: a group per ray was slower than a work-item per ray from about 10^4 rays on) a
-   cooperative kernel takes one ray per work-item. */
-#define TRACE_COOP_MAX_RAYS 4096
+   TRACE_COOP_MAX_RAYS (the device-side count; raytrace.query.COOP_MAX_RAYS mirrors it). Above
+   it (the H200: the pool's 36k depth-2 rays a group each took 2x as long as a work-item each;
+   its tail levels of 4k-12k rays gained) a cooperative kernel takes one ray per work-item. */
+#define TRACE_COOP_MAX_RAYS 16384
 /* for each ray i < n: one per work-group (coop_on) or one per work-item */
 #define TRACE_COOP_FOR(i, n, on)                                                            \
     for (uint i = (on) ? get_group_id(0) : get_global_id(0); i < (n);                      \

@@ -80,13 +80,13 @@ def test_coplanar_ties_give_the_serial_bytes(binary_rt):  # noqa: F811
 def test_a_level_of_many_rays_goes_one_per_work_item(binary_rt, monkeypatch):  # noqa: F811
     """The cooperative kernels check the device-side count: a level of more than
     TRACE_COOP_MAX_RAYS rays goes one ray per work-item in them (here the plan is made to pick
-    them for level 0's 4800 primary rays: the host's threshold raised), the deeper levels a
+    them for level 0's 19200 primary rays: the host's threshold raised), the deeper levels a
     group per ray; the serial bytes, in either order of the levels."""
     import raytrace.render as render_module
     from raytrace.query import COOP_MAX_RAYS
 
     rt = binary_rt
-    s = RenderSettings(width=80, height=60, bounces=2, spp=1)
+    s = RenderSettings(width=160, height=120, bounces=2, spp=1)
     scene = build(rt, 2)
     _, want, _, st = frame(rt, scene, s)
     assert st["rays_per_depth"][0] > COOP_MAX_RAYS >= st["rays_per_depth"][1] > 0
