@@ -74,6 +74,8 @@ check)  # the last commit's device tests and frames
     lb bench frame $f $static --out "$out/static" | tail -1
     lb bench frame $f --out "$out/pool" | tail -1
     lb bench frame $k $static --out "$out/static4k" | tail -1
+    lb bench frame $k --out "$out/pool4k" | tail -1
+    lb bench frame $f $static --frame-time 0.0025 --out "$out/static_rt" | tail -1
     ;;
 tail)   # what the deeper levels' rays are (bench/tail_rays.py), pool and static
     python3 bench/tail_rays.py --out "$out/tail_pool.json" > /dev/null
