@@ -10,7 +10,6 @@ writes no resource report the JSON still holds the work-group info."""
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import re
 import sys
@@ -87,8 +86,9 @@ def main() -> int:
               f"stack {r.get('stack', '-'):>5} spill {r.get('spill_stores', '-'):>4} "
               f"wg {r['max_work_group']:>5} private {r['private_bytes']:>6}")
     if a.out:
-        Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(a.out).write_text(json.dumps({"device": rt.name, "kernels": rows}, indent=1))
+        from app.io import write_json
+
+        write_json(a.out, {"device": rt.name, "kernels": rows})   # atomic
     return 0
 
 

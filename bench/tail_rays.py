@@ -52,6 +52,7 @@ def main() -> int:
     p.add_argument("--out", default=None, help="JSON file")
     a = p.parse_args()
 
+    from app.io import write_json
     from app.scene import load_scene
     from app.world import World
     from raytrace.bvh import HIT_DTYPE
@@ -75,8 +76,7 @@ def main() -> int:
                 out["levels"][d] = describe(rays, hits, world.instances)
     print(json.dumps(out, indent=1))
     if a.out:
-        Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(a.out).write_text(json.dumps(out, indent=1))
+        write_json(a.out, out)   # atomic: a temporary file, then a rename
     return 0
 
 
