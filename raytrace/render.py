@@ -203,9 +203,9 @@ LAUNCH_FLOOR = 1 << 16
 BIN_WG = 256
 #: With ``cost_bins``, the levels from depth 1 whose shadow rays are binned: those whose last
 #: count is at least this (about one wave of the H200's 132 x 2048 work-items), or all when no
-#: count has arrived. On the H200 the pool's level 1 (958k shadow rays, half of them crossing
-#: the water) took 0.61 instead of 0.88 ms binned, while level 0 (2M hits of one kind) and the
-#: tail levels of 4k-50k rays were 5-15% slower binned (BENCHMARKS.md, 2026-12-02). The
+#: count has arrived. On the H200 the baseline scene's level 1 (958k shadow rays, half of them
+#: crossing the water) took 0.62 instead of 0.89 ms binned, while level 0 (2M hits of one kind)
+#: and the tail levels of 4k-50k rays were 5-15% slower binned (BENCHMARKS.md, 2026-12-02). The
 #: secondary trace binned the same way (refracted rays apart from reflected) was 3-6% slower.
 BIN_MIN_RAYS = 1 << 18
 
