@@ -7,7 +7,8 @@
 #   unbinned per depth, and the tables of BENCHMARKS.md; PART rule: the combined launch's rule;
 #   PART span: the device span of a frame against its kernels and wall, and a queue without
 #   profiling; PART check: the last commit's device tests and frames; PART tail: what the
-#   deeper levels' rays are; PART coopmax: the cooperative kernels' ray limit. One device call each, 1-2 minutes. The
+#   deeper levels' rays are; PART coopmax: the cooperative kernels' ray limit; PART binwg: the
+#   binned kernels' work-group size. One device call each, 1-2 minutes. The
 #   device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -104,6 +105,19 @@ coopmax)   # the cooperative kernels' ray limit (COOP_MAX_RAYS) 4096 against 819
             --out "$out/pool_coopmax$m" | tail -1)
         (cd $w && PYTHONPATH=/tmp/site:$w python3 -m app.cli bench frame $f $static \
             --per-depth --out "$out/static_coopmax$m" | tail -1)
+    done
+    ;;
+binwg)   # the binned kernels' work-group (BIN_WG) 256 against 128 and 512, from copies
+    for m in 256 128 512; do
+        w=/tmp/binwg$m
+        rm -rf $w && mkdir -p $w && cp -r app kernels lbm raytrace scenes bench $w/
+        sed -i "s/^BIN_WG = 256/BIN_WG = $m/" $w/raytrace/render.py
+        sed -i "s/#define RENDER_BIN_WG 256 /#define RENDER_BIN_WG $m /" $w/kernels/render_bins.h
+        grep -c "RENDER_BIN_WG $m " $w/kernels/render_bins.h
+        (cd $w && PYTHONPATH=/tmp/site:$w python3 -m app.cli bench frame $f $static \
+            --per-depth --out "$out/static_binwg$m" | tail -1)
+        (cd $w && PYTHONPATH=/tmp/site:$w python3 -m app.cli bench frame $f --per-depth \
+            --out "$out/pool_binwg$m" | tail -1)
     done
     ;;
 *) echo "unknown part $part"; exit 2 ;;
