@@ -15,6 +15,19 @@ out=${1:?OUTDIR}
 part=${2:?PART}
 mkdir -p "$out"
 lb() { python3 -m app.cli "$@"; }
+# variant_tree DIR (SED FILE)...: a copy of the sources in DIR with each FILE edited by its SED
+# (it says which files stayed as they are: the baseline's); in_tree DIR ARGS...: lbwater ARGS
+# run from that copy
+variant_tree() {
+    local w=$1; shift
+    rm -rf "$w" && mkdir -p "$w" && cp -r app kernels lbm raytrace scenes bench "$w"/
+    while [ $# -gt 1 ]; do
+        sed -i "$1" "$w/$2"
+        cmp -s "$2" "$w/$2" && echo "$w: $2 unchanged"
+        shift 2
+    done
+}
+in_tree() { local w=$1; shift; (cd "$w" && PYTHONPATH=/tmp/site:$w python3 -m app.cli "$@"); }
 f="--cells 1024 --size 1920 1080 --frames 40"
 k="--cells 1024 --size 3840 2160 --frames 20"
 static="--scene bench/scenes/pool_static_boat.toml"
@@ -95,29 +108,21 @@ for n in ('pool', 'static'):
 coopmax)   # the cooperative kernels' ray limit (COOP_MAX_RAYS) 4096 against 8192 and 16384,
            # each from a copy of the tree with both mirrors of the limit changed
     for m in 4096 8192 16384; do
-        w=/tmp/coopmax$m
-        rm -rf $w && mkdir -p $w && cp -r app kernels lbm raytrace scenes bench $w/
-        sed -i "s/^COOP_MAX_RAYS = 4096/COOP_MAX_RAYS = $m/" $w/raytrace/query.py
-        sed -i "s/#define TRACE_COOP_MAX_RAYS 4096/#define TRACE_COOP_MAX_RAYS $m/" \
-            $w/kernels/traverse_coop.h
-        grep -c "COOP_MAX_RAYS = $m" $w/raytrace/query.py
-        (cd $w && PYTHONPATH=/tmp/site:$w python3 -m app.cli bench frame $f --per-depth \
-            --out "$out/pool_coopmax$m" | tail -1)
-        (cd $w && PYTHONPATH=/tmp/site:$w python3 -m app.cli bench frame $f $static \
-            --per-depth --out "$out/static_coopmax$m" | tail -1)
+        variant_tree /tmp/coopmax$m "s/^COOP_MAX_RAYS = 4096/COOP_MAX_RAYS = $m/" \
+            raytrace/query.py "s/#define TRACE_COOP_MAX_RAYS 4096/#define TRACE_COOP_MAX_RAYS $m/" \
+            kernels/traverse_coop.h
+        in_tree /tmp/coopmax$m bench frame $f --per-depth --out "$out/pool_coopmax$m" | tail -1
+        in_tree /tmp/coopmax$m bench frame $f $static --per-depth \
+            --out "$out/static_coopmax$m" | tail -1
     done
     ;;
 binwg)   # the binned kernels' work-group (BIN_WG) 256 against 128 and 512, from copies
     for m in 256 128 512; do
-        w=/tmp/binwg$m
-        rm -rf $w && mkdir -p $w && cp -r app kernels lbm raytrace scenes bench $w/
-        sed -i "s/^BIN_WG = 256/BIN_WG = $m/" $w/raytrace/render.py
-        sed -i "s/#define RENDER_BIN_WG 256 /#define RENDER_BIN_WG $m /" $w/kernels/render_bins.h
-        grep -c "RENDER_BIN_WG $m " $w/kernels/render_bins.h
-        (cd $w && PYTHONPATH=/tmp/site:$w python3 -m app.cli bench frame $f $static \
-            --per-depth --out "$out/static_binwg$m" | tail -1)
-        (cd $w && PYTHONPATH=/tmp/site:$w python3 -m app.cli bench frame $f --per-depth \
-            --out "$out/pool_binwg$m" | tail -1)
+        variant_tree /tmp/binwg$m "s/^BIN_WG = 256/BIN_WG = $m/" raytrace/render.py \
+            "s/#define RENDER_BIN_WG 256 /#define RENDER_BIN_WG $m /" kernels/render_bins.h
+        in_tree /tmp/binwg$m bench frame $f $static --per-depth --out "$out/static_binwg$m" \
+            | tail -1
+        in_tree /tmp/binwg$m bench frame $f --per-depth --out "$out/pool_binwg$m" | tail -1
     done
     ;;
 *) echo "unknown part $part"; exit 2 ;;

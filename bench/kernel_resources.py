@@ -49,18 +49,16 @@ def main() -> int:
     p.add_argument("--scene", default=str(ROOT / "bench/scenes/pool_static_boat.toml"))
     p.add_argument("--out", default=None, help="JSON file")
     a = p.parse_args()
-    os.environ["LBWATER_CL_OPTIONS"] = (os.environ.get("LBWATER_CL_OPTIONS", "")
-                                        + " -cl-nv-verbose")
     import pyopencl as cl
 
     from app.scene import load_scene
     from app.world import World
     from kernels import get_runtime
 
-    rt = get_runtime()
-    if "nvidia" not in rt.device.platform.name.lower():   # the option is NVIDIA's
-        os.environ["LBWATER_CL_OPTIONS"] = os.environ["LBWATER_CL_OPTIONS"].replace(
-            "-cl-nv-verbose", "")
+    rt = get_runtime()   # programs are built later, with the options then in force
+    if "nvidia" in rt.device.platform.name.lower():   # the option is NVIDIA's
+        os.environ["LBWATER_CL_OPTIONS"] = (os.environ.get("LBWATER_CL_OPTIONS", "")
+                                            + " -cl-nv-verbose")
     world = World(load_scene(a.scene), rt, width=320, height=180, cells=128)
     for _ in range(3):
         world.frame(1 / 60)

@@ -10,6 +10,6 @@ __kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void render_
          base += get_num_groups(0) * RENDER_BIN_WG) {
         const uint j = base + get_local_id(0);
         const uint i = bin_round(&bins, j, j < n ? classes[j] : RENDER_BIN_IDLE);
-        if (base + get_local_id(0) < n + RENDER_BIN_WG) out[base + get_local_id(0)] = i;
+        out[j] = i;   /* out holds every round's RENDER_BIN_WG slots */
     }
 }

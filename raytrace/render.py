@@ -468,34 +468,36 @@ class Renderer:
                     self._bound_sig = None
         if s.cost_bins:   # the shadow launches with their rays grouped by cost
             for d, ks in enumerate(self._k):
-                names = [("shadow", "render_shade.cl", "render_shadow")]
-                if d > 0 and s.overlap_levels:
-                    names += [("shadow_trace", "render_shadow_trace.cl", "render_shadow_trace"),
-                              ("shadow_trace_shade", "render_shadow_trace.cl",
-                               "render_shadow_trace_shade")]
-                for key, source, name in names:
-                    if key + "_binned" not in ks:
-                        ks[key + "_binned"] = rt.kernel_launcher(
-                            source, name + "_binned", stage=ks[key].stage)
-                        self._bound_sig = None
+                self._add_flavour(ks, d, "_binned", self._SHADOW)
         if s.coop_from is not None:   # the cooperative flavours of the levels from coop_from
             # on a CPU the serial walk per work-item (kernels/traverse_coop.h TRACE_COOP_SERIAL:
             # PoCL compiles the walk inside these kernels for minutes; the hits are the same)
             coop = {"TRACE_COOP": 1, "TRACE_COOP_SERIAL": int(not rt.is_gpu)}
             for d, ks in enumerate(self._k[s.coop_from:], s.coop_from):
-                names = [("trace", "render_trace.cl", "render_trace"),
-                         ("trace_shade", "render_trace.cl", "render_trace_shade"),
-                         ("shadow", "render_shade.cl", "render_shadow")]
-                if d > 0 and s.overlap_levels:
-                    names += [("shadow_trace", "render_shadow_trace.cl", "render_shadow_trace"),
-                              ("shadow_trace_shade", "render_shadow_trace.cl",
-                               "render_shadow_trace_shade")]
-                for key, source, name in names:
-                    if key + "_coop" not in ks:
-                        ks[key + "_coop"] = rt.kernel_launcher(
-                            source, name + "_coop", stage=ks[key].stage, defines=coop)
-                        self._bound_sig = None
+                self._add_flavour(ks, d, "_coop", self._TRACE + self._SHADOW, coop)
         return self._k[depth]
+
+    #: Kernels (key, source, name) that come in flavours (``*_coop``, ``*_binned``) with the
+    #: plain kernel's arguments: the traces, the shadow rays, and from depth 1 with
+    #: overlap_levels the combined shadow + trace launches.
+    _TRACE = (("trace", "render_trace.cl", "render_trace"),
+              ("trace_shade", "render_trace.cl", "render_trace_shade"))
+    _SHADOW = (("shadow", "render_shade.cl", "render_shadow"),)
+    _SHADOW_TRACE = (("shadow_trace", "render_shadow_trace.cl", "render_shadow_trace"),
+                     ("shadow_trace_shade", "render_shadow_trace.cl",
+                      "render_shadow_trace_shade"))
+
+    def _add_flavour(self, ks: dict, d: int, suffix: str, kernels: tuple,
+                     defines: dict | None = None) -> None:
+        """Level ``d``'s ``suffix`` flavour of ``kernels`` (and of the combined launches where
+        the level has them) in ``ks``, made once, timed under the plain kernel's stage."""
+        if d > 0 and self.settings.overlap_levels:
+            kernels = kernels + self._SHADOW_TRACE
+        for key, source, name in kernels:
+            if key + suffix not in ks:
+                ks[key + suffix] = self.rt.kernel_launcher(
+                    source, name + suffix, stage=ks[key].stage, defines=defines)
+                self._bound_sig = None
 
     def _bind(self, levels: int) -> None:
         """Bind every kernel's arguments by name when the scene's buffers changed (a rebuild,
@@ -527,23 +529,21 @@ class Renderer:
                                   hits=hits, **out)
             light = {"lights": self.scene.light_buf, "caustic_map": self.caustic_map,
                      "cprm": self.caustic_params}
-            k["shadow"].bind(**scene, **shading, **light, **wave, hits=hits, radiance=radiance)
-            if "shadow_binned" in k:
-                k["shadow_binned"].bind(**scene, **shading, **light, **wave, hits=hits,
-                                        radiance=radiance)
+            for f in ("", "_binned"):   # the binned flavour: the plain kernel's arguments
+                if "shadow" + f in k:
+                    k["shadow" + f].bind(**scene, **shading, **light, **wave, hits=hits,
+                                         radiance=radiance)
             if "shadow_trace" in k:   # level d - 1's shadow rays, level d's trace (and shade)
                 last = {"shadow_rays": self.rays[(d - 1) % 2],
                         "shadow_hits": self.hits[(d - 1) % 2],
                         "shadow_radiance": self.radiance[(d - 1) % 2]}
-                k["shadow_trace"].bind(**scene, **shading, **light, **last, **wave, hits=hits)
-                k["shadow_trace_shade"].bind(**scene, **shading, **light, **last,
-                                             cam=self.camera_buf, **wave, hits=hits, **out)
-            if "shadow_trace_binned" in k:
-                k["shadow_trace_binned"].bind(**scene, **shading, **light, **last, **wave,
-                                              hits=hits)
-                k["shadow_trace_shade_binned"].bind(**scene, **shading, **light, **last,
-                                                    cam=self.camera_buf, **wave, hits=hits,
-                                                    **out)
+                for f in ("", "_binned"):
+                    if "shadow_trace" + f in k:
+                        k["shadow_trace" + f].bind(**scene, **shading, **light, **last, **wave,
+                                                   hits=hits)
+                        k["shadow_trace_shade" + f].bind(**scene, **shading, **light, **last,
+                                                         cam=self.camera_buf, **wave,
+                                                         hits=hits, **out)
             if "trace_coop" in k:   # the cooperative flavours: the same arguments
                 k["trace_coop"].bind(**scene, **wave, hits=hits)
                 k["trace_shade_coop"].bind(**scene, **shading, cam=self.camera_buf, **wave,
@@ -705,13 +705,10 @@ class Renderer:
                 return COOP_WIDTH * min(few[d], COOP_MAX_GROUPS)
             return -(-size // COOP_WIDTH) * COOP_WIDTH   # else a work-item per ray
 
-        def binned(d: int) -> bool:   # level d's shadow rays grouped by cost (the same hits)
-            return bins[d]
-
         def per_ray(k: dict, name: str, d: int, size: tuple) -> None:  # any flavour
             if coop(d):
                 launch(k[name + "_coop"], (coop_size(d, size[0]),), (COOP_WIDTH,))
-            elif binned(d) and name + "_binned" in k:
+            elif bins[d] and name + "_binned" in k:
                 launch(k[name + "_binned"], (-(-size[0] // BIN_WG) * BIN_WG,), (BIN_WG,))
             else:
                 launch(k[name], size, ls)
@@ -760,7 +757,7 @@ class Renderer:
                                 coop_size(depth, ray_size[0])),), (COOP_WIDTH,))
                 elif has_lights:
                     both = ray_size[0] + next_size[0]
-                    if binned(depth):
+                    if bins[depth]:
                         launch(nxt["shadow_" + trace + "_binned"],
                                (-(-both // BIN_WG) * BIN_WG,), (BIN_WG,))
                     else:

@@ -211,7 +211,7 @@ def test_stats_are_the_last_completed_frame(tiny, rt):
     assert st.lbm_steps >= 1 and st.stage_ms["lbm.step"] > 0 and st.kernel_ms > 0
     # the device span: the kernels one after another on one queue, with the gaps between them
     assert st.device_span_ms >= st.kernel_ms * (1 - 1e-9)
-    assert st.device_span_ms < st.kernel_ms + 1e3 * 60
+    assert st.device_span_ms <= st.wall_ms + 5.0   # inside the host's enqueue-to-image time
     assert st.n_rays >= 24 * 16 and st.rays_per_depth[0] == 24 * 16
     assert st.n_triangles > 0 and st.device_bytes > 0 and st.water_cells == (16, 16)
     world.enqueue_frame(0.05)  # a third frame waits for neither of the two in flight
