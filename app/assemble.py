@@ -160,15 +160,17 @@ class _Builder:
             if m in self.scene.boats:
                 self.boat_instances.append(inst)
 
-    def water(self, sim, water: WaterSpec) -> WaterSurface:
+    def water(self, sim, water: WaterSpec, water_accel: str) -> WaterSurface:
         import lbm
 
         rs, pool = self.rs, self.scene.pool
         nx, ny = water.cells
         water_mat = self.material(pool.water_material if pool else "", WATER)
         # the solver writes the surface straight into the buffers the BVH and shader read
-        mesh, vertices, normals = rs.add_dynamic_mesh(nx * ny, lbm.grid_triangles(nx, ny),
-                                                      material=water_mat)
+        # grid: traced as a height field (raytrace.heightfield), no BVH; bvh: an LBVH refitted
+        mesh, vertices, normals = rs.add_dynamic_mesh(
+            nx * ny, lbm.grid_triangles(nx, ny), material=water_mat,
+            grid=(nx, ny) if water_accel == "grid" else None)
         sim.write_surface(vertices, normals, water.origin)
         inst = rs.add_instance(mesh)
         self.instances[inst] = "water"
@@ -191,13 +193,26 @@ def water_spec(scene: Scene, cells: int | None = None) -> WaterSpec | None:
     return resized_water(scene.water, cells)
 
 
-def assemble(scene: Scene, rt, *, cells: int | None = None, water_steps: int | None = None
-             ) -> Assembly:
+#: How rays find the water surface: ``grid`` walks its cells as a height field (a bounds pass
+#: per frame, no BVH: raytrace.heightfield), ``bvh`` refits (or rebuilds) an LBVH over it.
+WATER_ACCELS = ("grid", "bvh")
+
+
+def check_water_accel(water_accel: str) -> str:
+    if water_accel not in WATER_ACCELS:
+        raise InputError(f"water_accel {water_accel!r} is not one of {', '.join(WATER_ACCELS)}")
+    return water_accel
+
+
+def assemble(scene: Scene, rt, *, cells: int | None = None, water_steps: int | None = None,
+             water_accel: str = "grid") -> Assembly:
     """Make the solver and the render scene of ``scene`` on runtime ``rt``.
 
     ``cells``: the water grid's cells along its longer side (default: the scene's);
-    ``water_steps``: LBM steps taken before the first frame (default ``[pool] steps``, 30).
+    ``water_steps``: LBM steps taken before the first frame (default ``[pool] steps``, 30);
+    ``water_accel``: one of :data:`WATER_ACCELS`.
     """
+    check_water_accel(water_accel)
     check_material_names(scene)
     b = _Builder(scene, rt)
     b.materials_lights_sky()
@@ -212,7 +227,7 @@ def assemble(scene: Scene, rt, *, cells: int | None = None, water_steps: int | N
             scene.pool.steps if scene.pool else 30)
         if steps:
             sim.step(int(steps))
-        surface = b.water(sim, water)
+        surface = b.water(sim, water, water_accel)
     boats = None
     if sim is not None and scene.boats:
         # after every instance exists: the transform buffer no longer moves

@@ -65,7 +65,11 @@ def add_arguments(p) -> None:
                    help="copy each image out of the pinned read-back array and check its pixels "
                         "inside the timed loop (the cost a read_frame() caller adds)")
     p.add_argument("--rebuild", action="store_true",
-                   help="rebuild the water BVH every frame instead of refitting it")
+                   help="rebuild the water BVH every frame instead of refitting it (implies "
+                        "--water-accel bvh)")
+    p.add_argument("--water-accel", choices=("grid", "bvh"), default=None,
+                   help="how rays find the water: grid (its cells walked as a height field, "
+                        "the default) or bvh (an LBVH refitted each frame)")
 
 
 def with_boats(scene, n: int):
@@ -139,7 +143,8 @@ def run(args) -> int:
     rows = []
     for cells in args.cells:
         world = World(scene, rt, width=args.size[0], height=args.size[1], cells=cells,
-                      rebuild_water_bvh=args.rebuild, caustics=args.caustics)
+                      rebuild_water_bvh=args.rebuild, caustics=args.caustics,
+                      water_accel=getattr(args, "water_accel", None))
         if getattr(args, "per_depth", False):
             world.renderer.set_stage_per_depth(True)
         world.renderer.set_overlap(not getattr(args, "no_overlap", False), overlap_from)
@@ -191,7 +196,9 @@ def run(args) -> int:
                "water_triangles": 2 * (nx - 1) * (ny - 1),
                "triangles": st.n_triangles, "width": args.size[0],
                "height": args.size[1], "lbm_steps_per_frame": round(statistics.mean(steps), 3),
-               "bvh": "rebuild" if args.rebuild else "refit", "host_copy": host_copy,
+               "water_accel": world.water_accel,
+               "bvh": ("rebuild" if args.rebuild else "refit") if world.water_accel == "bvh"
+               else "none", "host_copy": host_copy,
                "overlap": world.renderer.settings.overlap_levels,
                "overlap_from": world.renderer.settings.overlap_from,
                "coop_from": world.renderer.settings.coop_from,

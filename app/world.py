@@ -124,8 +124,10 @@ class World:
     ``scene``: an :class:`app.scene.Scene` or a path to a scene file. ``width``, ``height``,
     ``spp``, ``bounces`` override ``[render]``; ``cells`` resizes the water grid (cells along
     its longer side); ``water_steps`` overrides ``[pool] steps`` (LBM steps before the first
-    frame); ``seed`` overrides ``[shading] seed``; ``rebuild_water_bvh`` rebuilds the water BVH
-    each frame instead of refitting it; ``caustics`` (off | traced) overrides ``[shading]
+    frame); ``seed`` overrides ``[shading] seed``; ``water_accel`` picks how rays find the
+    water, ``"grid"`` (its cells walked as a height field: the default) or ``"bvh"`` (an LBVH,
+    refitted; ``rebuild_water_bvh`` rebuilds it each frame instead and implies ``"bvh"``);
+    ``caustics`` (off | traced) overrides ``[shading]
     caustics`` (True/False: traced/off). ``image``: what :meth:`read_frame` returns, ``"rgba"``
     (height, width, 4) or ``"yuv420p"`` (the flat Y, U, V planes a video encoder takes,
     converted on the device: 1.5 bytes a pixel cross to the host instead of 4).
@@ -135,8 +137,9 @@ class World:
 
     def __init__(self, scene, device=None, *, width=None, height=None, spp=None, bounces=None,
                  aov=False, water_steps=None, cells=None, rebuild_water_bvh=False,
-                 seed=None, frames_in_flight: int = 2, caustics=None, image: str = "rgba"):
-        from app.assemble import assemble, caustic_settings, render_settings
+                 water_accel=None, seed=None, frames_in_flight: int = 2, caustics=None,
+                 image: str = "rgba"):
+        from app.assemble import assemble, caustic_settings, check_water_accel, render_settings
         from app.scene import Scene, load_scene
         from kernels import get_runtime
         from raytrace.render import Renderer, device_coop_from, device_cost_bins
@@ -149,11 +152,18 @@ class World:
                              f"{type(scene).__name__}")
         if image not in self.IMAGES:   # before any device work
             raise InputError(f"World: image {image!r} must be one of {', '.join(self.IMAGES)}")
+        if water_accel is None:
+            water_accel = "bvh" if rebuild_water_bvh else "grid"
+        if check_water_accel(water_accel) == "grid" and rebuild_water_bvh:
+            raise InputError("rebuild_water_bvh needs water_accel 'bvh': a height field has no "
+                             "BVH")
         if not 1 <= int(frames_in_flight) <= 8:
             raise InputError(f"frames_in_flight {frames_in_flight} out of range; allowed [1, 8]")
         self.scene = scene
         self.rt = get_runtime(device)
-        a = assemble(scene, self.rt, cells=cells, water_steps=water_steps)
+        a = assemble(scene, self.rt, cells=cells, water_steps=water_steps,
+                     water_accel=water_accel)
+        self.water_accel = water_accel
         self.render_scene, self.sim, self.water = a.render_scene, a.sim, a.water
         self.instances = a.instances
         self.boats = a.boats  # lbm.bodies.Boats: stepped inside every water step (a step hook)

@@ -6,6 +6,7 @@
 #define LBWATER_SCENE_H
 
 #include "bvh.h"
+#include "heightfield.h"
 
 /* tlas_info  : header of the top-level BVH (root node, -1 when the scene has no instance);
    tlas_nodes : top-level nodes over instance boxes; leaves index tlas_prims;
@@ -13,6 +14,9 @@
    instances  : Instance records by instance id;
    blas_nodes : every mesh's nodes in one array (instances hold their root index);
    blas_tris  : every mesh's triangles in one array, in leaf order (wide: in blocks);
+   hf_info, hf_vertices, hf_blocks: the scene's height field (heightfield.h; hf_info->mesh is
+                HF_NONE without one): its record, its vertices (the writer's buffer) and the y
+                range of each block of its cells;
    trace_stats: [0] counts traversal-stack overflows (never expected: the stack is deeper than
                 any tree the builder can make; a non-zero count means hits may be missing);
                 [1] counts cooperative walks redone serially (TRACE_STAT_COOP_REDO);
@@ -36,9 +40,12 @@
     __global const BvhInfo* restrict tlas_info, __global const BvhNode* restrict tlas_nodes,    \
     __global const int* restrict tlas_prims, __global const Instance* restrict instances,       \
     __global const BLAS_NODE* restrict blas_nodes, __global const BLAS_PRIM* restrict blas_tris, \
-    __global int* restrict trace_stats
+    __global const HeightField* restrict hf_info, __global const float4* restrict hf_vertices,  \
+    __global const float2* restrict hf_blocks, __global int* restrict trace_stats
 
-#define SCENE_ARGS tlas_info, tlas_nodes, tlas_prims, instances, blas_nodes, blas_tris, trace_stats
+#define SCENE_ARGS                                                                             \
+    tlas_info, tlas_nodes, tlas_prims, instances, blas_nodes, blas_tris, hf_info, hf_vertices,  \
+        hf_blocks, trace_stats
 
 #define TRACE_STAT_OVERFLOW 0
 /* rays of the cooperative walk (traverse_coop.h) traced again serially because its local stack

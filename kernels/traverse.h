@@ -164,6 +164,15 @@ TRACE_INLINE bool trace_triangle(const TraceRay* r, float3 p0, float3 p1, float3
     return true;
 }
 
+/* Of two hits at one distance, is (inst, prim) the one to keep over *hit? The smaller pair:
+   the same rule as the cooperative walk (traverse_coop.h), so both give the same hit whatever
+   order they meet the triangles in. */
+TRACE_INLINE bool trace_tie_wins(int inst, int prim, const Hit* hit) {
+    return inst < hit->inst || (inst == hit->inst && prim < hit->prim);
+}
+
+#include "traverse_heightfield.h"
+
 TRACE_INLINE void trace_push(int* stack, int* sp, int node, __global int* restrict trace_stats) {
     if (*sp < TRACE_STACK) stack[(*sp)++] = node;
     else atomic_inc(trace_stats + TRACE_STAT_OVERFLOW);
@@ -402,13 +411,6 @@ TRACE_INLINE bool trace_blas(__global const WideNode* restrict nodes,
     }
 }
 #else
-/* Of two hits at one distance, is (inst, prim) the one to keep over *hit? The smaller pair:
-   the same rule as the cooperative walk (traverse_coop.h), so both give the same hit whatever
-   order they meet the triangles in. */
-TRACE_INLINE bool trace_tie_wins(int inst, int prim, const Hit* hit) {
-    return inst < hit->inst || (inst == hit->inst && prim < hit->prim);
-}
-
 /* One mesh's BVH from `root`. Shrinks *tmax to each closer hit and records it in *hit; of hits
    at one distance, the smaller (inst, prim) (trace_tie_wins). */
 TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
@@ -466,14 +468,20 @@ TRACE_INLINE bool trace_blas(__global const BvhNode* restrict nodes,
 }
 #endif
 
-/* A world ray in instance ``ins``'s object space, prepared for its BLAS. */
-TRACE_INLINE TraceRay trace_object_ray(__global const Instance* ins, float3 org, float3 dir) {
+/* A world ray in instance ``ins``'s object space, prepared for its BLAS; *o, *d: that origin and
+   direction. */
+TRACE_INLINE TraceRay trace_object_ray_od(__global const Instance* ins, float3 org, float3 dir,
+                                          float3* o, float3* d) {
     float4 m0 = ins->object_from_world[0], m1 = ins->object_from_world[1],
            m2 = ins->object_from_world[2];
-    float3 o = (float3)(dot(m0.xyz, org) + m0.w, dot(m1.xyz, org) + m1.w,
-                        dot(m2.xyz, org) + m2.w);
-    float3 dd = (float3)(dot(m0.xyz, dir), dot(m1.xyz, dir), dot(m2.xyz, dir));
-    return trace_ray_setup(o, dd);
+    *o = (float3)(dot(m0.xyz, org) + m0.w, dot(m1.xyz, org) + m1.w, dot(m2.xyz, org) + m2.w);
+    *d = (float3)(dot(m0.xyz, dir), dot(m1.xyz, dir), dot(m2.xyz, dir));
+    return trace_ray_setup(*o, *d);
+}
+
+TRACE_INLINE TraceRay trace_object_ray(__global const Instance* ins, float3 org, float3 dir) {
+    float3 o, d;
+    return trace_object_ray_od(ins, org, dir, &o, &d);
 }
 
 /* The whole scene: the TLAS over instances, each instance's BLAS in its object space; only
@@ -490,6 +498,7 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
     if (root < 0 || !(tmax > tmin) || (dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f))
         return false;
     TraceRay wr = trace_ray_setup(org, dir);
+    const int hf_mesh = hf_info->mesh;
     float tbest = tmax;
     int stack[TRACE_STACK];
     int sp = 0, node = root;
@@ -511,13 +520,17 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
                     __global const Instance* ins = instances + id;
                     int broot = ins->blas_root;
                     if (broot < 0 || !(ins->mask & mask)) continue;
-                    TraceRay lr = trace_object_ray(ins, org, dir);
+                    float3 oo, od;
+                    TraceRay lr = trace_object_ray_od(ins, org, dir, &oo, &od);
                     TRACE_TICK(work, TRACE_CNT_ENTRIES, 1);
 #if TRACE_COUNT
                     uint before = work[TRACE_CNT_BLAS];
 #endif
-                    bool got = trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, &tbest, hit,
-                                          id, any, trace_stats, work);
+                    bool got = ins->mesh == hf_mesh
+                        ? trace_heightfield(hf_info, hf_vertices, hf_blocks, &lr, oo, od, tmin,
+                                            &tbest, hit, id, any)
+                        : trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, &tbest, hit, id,
+                                     any, trace_stats, work);
 #if TRACE_COUNT
                     inst_work[min(id, TRACE_COUNT_INST - 1)] += work[TRACE_CNT_BLAS] - before;
 #endif

@@ -15,7 +15,8 @@
    and pushes the inner children hit, and for a leaf child each instance's BLAS root (mask
    test, object-space ray as trace_scene_walk); a BLAS node tests both child boxes with its
    instance's object-space ray and pushes the inner children hit, and tests the triangles of
-   its leaf children. The closest hit so far is shared through an atomic_min on an
+   its leaf children; the scene's height field (heightfield.h) is walked by the lane that
+   enters its instance, alone (trace_heightfield). The closest hit so far is shared through an atomic_min on an
    order-preserving integer key of t. Boxes and triangles are kept up to AND including that
    distance, so every triangle hit at the final distance is tested and the result is the hit
    of smallest (t, inst, prim): deterministic whatever the order of the lanes. Where the
@@ -134,6 +135,7 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
     if (root < 0 || !(tmax > tmin) || (dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f))
         return false; /* the same for every lane: the scratch is untouched */
     const int lid = get_local_id(0);
+    const int hf_mesh = hf_info->mesh;
     const TraceRay wr = trace_ray_setup(org, dir);
     if (lid == 0) {
         coop->node[0] = root;
@@ -187,7 +189,33 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
                     __global const Instance* ins = instances + id;
                     int broot = ins->blas_root;
                     if (broot < 0 || !(ins->mask & mask)) continue;
-                    trace_coop_push(coop, p ^ 1, broot, id, te);
+                    if (ins->mesh != hf_mesh) {
+                        trace_coop_push(coop, p ^ 1, broot, id, te);
+                        continue;
+                    }
+                    /* the height field: this lane walks it alone, its hit merged as a leaf's */
+                    float3 oo, od;
+                    const TraceRay hr = trace_object_ray_od(ins, org, dir, &oo, &od);
+                    Hit hh;
+                    hh.prim = -1;
+                    hh.inst = -1;
+                    float hmax = trace_coop_tri_max(b, tmax);
+                    if (!trace_heightfield(hf_info, hf_vertices, hf_blocks, &hr, oo, od, tmin,
+                                           &hmax, &hh, id, any))
+                        continue;
+                    if (trace_coop_before(hh.t, id, hh.prim, pt, pinst, pprim)) {
+                        pt = hh.t;
+                        pu = hh.u;
+                        pv = hh.v;
+                        pprim = hh.prim;
+                        pinst = id;
+                    }
+                    if (any) {
+                        atomic_or(&coop->flags, TRACE_COOP_FOUND);
+                        break;
+                    }
+                    b = fmin(b, hh.t);
+                    atomic_min(&coop->best, trace_coop_key(hh.t));
                 }
             } else if (cnt > 0) { /* BLAS leaf: its triangles */
                 float tri_max = trace_coop_tri_max(b, tmax);

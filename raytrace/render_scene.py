@@ -217,7 +217,8 @@ class RenderScene:
         return mesh_id
 
     def add_dynamic_mesh(self, n_vertices: int, triangles, *, material: int = 0,
-                         tri_materials=None, normals: bool = True
+                         tri_materials=None, normals: bool = True,
+                         grid: tuple[int, int] | None = None
                          ) -> tuple[int, cl.Buffer, cl.Buffer | None]:
         """A mesh whose vertices a device stage writes every frame, stored once.
 
@@ -227,7 +228,9 @@ class RenderScene:
         shader read in place: no per-frame copy. ``triangles``: (m, 3) vertex indices (the
         topology is fixed). The buffers stay valid until another dynamic mesh is added (which
         moves every dynamic mesh to larger arrays, contents copied on the device); take them
-        again then with :meth:`dynamic_buffers`. Refitted by every :meth:`update`.
+        again then with :meth:`dynamic_buffers`. Refitted by every :meth:`update`;
+        ``grid=(nx, ny)``: an ``nx x ny`` vertex grid traced as a height field instead
+        (``raytrace.scene.Scene.add_mesh``).
         """
         nv = int(n_vertices)
         if nv < 3:
@@ -259,7 +262,7 @@ class RenderScene:
                "has_normals": bool(normals), "vbuf": None, "tbuf": None, "nbuf": None}
         self._layout_dynamic(old + [rec])
         mesh_id = self.scene.add_mesh(rec["vbuf"], self.rt.to_device(tris), dynamic=True,
-                                      n_vertices=nv, n_triangles=nt)
+                                      n_vertices=nv, n_triangles=nt, grid=grid)
         rec["tbuf"] = self.scene.mesh_record(mesh_id).triangles_buf
         self.meshes.append(rec)
         return mesh_id, rec["vbuf"], rec["nbuf"]
@@ -528,7 +531,8 @@ class RenderScene:
         from raytrace.bvh import NODE_DTYPE, TRI_DTYPE, node_count
         nt = max(self.n_triangles, 1)
         nv = sum(m["n_vertices"] for m in self.meshes)
-        bvh = sum(node_count(m["n_triangles"]) for m in self.meshes) * NODE_DTYPE.itemsize \
-            + self.n_triangles * TRI_DTYPE.itemsize
+        in_bvh = [0 if r.grid is not None else r.n_triangles for r in self.scene.meshes]
+        bvh = sum(node_count(n) for n in in_bvh) * NODE_DTYPE.itemsize \
+            + sum(in_bvh) * TRI_DTYPE.itemsize
         shading = nv * (16 + 16 + 8) + self.n_triangles * (12 + 2)
         return {"bvh": bvh / nt, "shading": shading / nt, "total": (bvh + shading) / nt}

@@ -29,6 +29,7 @@ from raytrace.bvh import (
     vertices_to_float4,
 )
 from raytrace.bvh_wide import DEFAULT_WIDE_LEAF_SIZE, WideStorage
+from raytrace.heightfield import HeightField, check_grid_triangles
 from raytrace.sort import make_sorter
 
 #: One row of the scene's transform buffer (kernels/transform.h, 48 bytes): an instance's
@@ -62,6 +63,7 @@ class MeshRecord:
     n_triangles: int
     dynamic: bool
     prim_base: int      #: first triangle in scene-wide numbering (sum of earlier meshes)
+    grid: tuple[int, int] | None = None  #: (nx, ny) of a grid mesh traced as a height field
     node_base: int = 0  #: first node slot in the shared node array
     tri_base: int = 0   #: first slot in the shared leaf-ordered triangle array
     blas: Blas | None = None
@@ -130,17 +132,23 @@ class Scene:
         self._reset = rt.kernel_launcher("bvh_build.cl", "bvh_reset_info",
                                          stage=f"{stage}.tlas.reset")
         self._reset.bind(infos=self.tlas_info, info_index=0, n_prims=0).set_size(1)
+        #: the grid mesh traced as a height field, if any (raytrace.heightfield)
+        self.heightfield = HeightField(rt, stage)
         self._init_empty_tlas()
 
     # -- content ---------------------------------------------------------------------------
     def add_mesh(self, vertices, triangles, *, dynamic: bool = False,
-                 n_vertices: int | None = None, n_triangles: int | None = None) -> int:
+                 n_vertices: int | None = None, n_triangles: int | None = None,
+                 grid: tuple[int, int] | None = None) -> int:
         """Add a mesh; returns its mesh id.
 
         ``vertices``/``triangles``: NumPy (n,3) floats / (m,3) ints (copied to the device), or
         device buffers (float4 per vertex, 3 x uint32 per triangle; pass ``n_vertices`` and
         ``n_triangles``; the scene keeps a reference and reads them at every build).
         ``dynamic``: refitted (or rebuilt) by every :meth:`update`; static meshes are built once.
+        ``grid=(nx, ny)``: the mesh is an ``nx x ny`` vertex grid with ``lbm.grid_triangles``'s
+        triangles (checked here), traced as a height field (:mod:`raytrace.heightfield`): no
+        BVH, a bounds pass per :meth:`update` instead of a refit, the same hits. One per scene.
         """
         name = f"mesh {len(self.meshes)}"
         if isinstance(vertices, cl.Buffer) != isinstance(triangles, cl.Buffer):
@@ -157,9 +165,28 @@ class Scene:
             vbuf = self.rt.to_device(vertices_to_float4(v))
             tbuf = self.rt.to_device(t)
             nv, nt = len(v), len(t)
+        if grid is not None:
+            self._check_grid(grid, triangles, tbuf, nv, nt, name)
         prim_base = sum(m.n_triangles for m in self.meshes)
-        self.meshes.append(MeshRecord(vbuf, tbuf, nv, nt, bool(dynamic), prim_base))
+        self.meshes.append(MeshRecord(vbuf, tbuf, nv, nt, bool(dynamic), prim_base,
+                                      None if grid is None else (int(grid[0]), int(grid[1]))))
+        if grid is not None:
+            self.heightfield.attach(len(self.meshes) - 1, int(grid[0]), int(grid[1]))
         return len(self.meshes) - 1
+
+    def _check_grid(self, grid, triangles, tbuf, nv: int, nt: int, name: str) -> None:
+        """A grid mesh's shape and triangles (read back once when given as a buffer)."""
+        if self.heightfield.mesh is not None:
+            raise ValueError(f"{name}: the scene already has a grid mesh (mesh "
+                             f"{self.heightfield.mesh}); one height field per scene")
+        if not isinstance(grid, tuple | list) or len(grid) != 2:
+            raise ValueError(f"{name}: grid must be (nx, ny), got {grid!r}")
+        nx, ny = grid
+        tris = (self.rt.to_host(tbuf, np.uint32, 3 * nt) if isinstance(triangles, cl.Buffer)
+                else np.asarray(triangles))
+        check_grid_triangles(tris, nx, ny, name)
+        if nx * ny != nv:
+            raise ValueError(f"{name}: a {nx}x{ny} grid has {nx * ny} vertices, got {nv}")
 
     def replace_vertex_buffer(self, mesh_id: int, vertices_buf: cl.Buffer) -> None:
         """Point a mesh given as device buffers at another vertex buffer of the same size (its
@@ -272,6 +299,8 @@ class Scene:
     def blas(self, mesh_id: int) -> Blas:
         """The BLAS of a mesh (exists after the first :meth:`update`)."""
         rec = self.mesh_record(mesh_id)
+        if rec.grid is not None:
+            raise ValueError(f"mesh {mesh_id} is a height field (grid {rec.grid}): it has no BVH")
         if rec.blas is None:
             raise ValueError(f"mesh {mesh_id} has no BVH yet: call Scene.update() first")
         return rec.blas
@@ -292,6 +321,11 @@ class Scene:
         if fresh:
             self._allocate_storage()
         for rec in self.meshes:
+            if rec.grid is not None:
+                if fresh or rec.dynamic or not self._hf_done:
+                    self.heightfield.enqueue_bounds(rec.vertices_buf, self.blas_infos)
+                    self._hf_done = True
+                continue
             if fresh or not rec.blas.built:
                 rec.blas.rebuild()
             elif rec.dynamic:
@@ -301,16 +335,20 @@ class Scene:
                     rec.blas.refit()
         self._build_tlas()
 
+    def _bvh_triangles(self, rec: MeshRecord) -> int:
+        """Triangles of a mesh's BVH (none for the height field)."""
+        return 0 if rec.grid is not None else rec.n_triangles
+
     def _allocate_storage(self) -> None:
         rt = self.rt
-        n_nodes = sum(node_count(m.n_triangles) for m in self.meshes)
-        n_tris = sum(m.n_triangles for m in self.meshes)
+        n_nodes = sum(node_count(self._bvh_triangles(m)) for m in self.meshes)
+        n_tris = sum(self._bvh_triangles(m) for m in self.meshes)
         self.blas_nodes = rt.buffer(NODE_DTYPE.itemsize * max(n_nodes, 1))
         self.blas_tris = rt.buffer(TRI_DTYPE.itemsize * max(n_tris, 1))
         self.blas_infos = rt.buffer(INFO_DTYPE.itemsize * max(len(self.meshes), 1))
         self.mesh_prim_base = rt.to_device(
             np.array([m.prim_base for m in self.meshes] or [0], np.int32))
-        counts = [m.n_triangles for m in self.meshes]
+        counts = [self._bvh_triangles(m) for m in self.meshes]
         wide = WideStorage.for_scene(rt, counts) if self.wide else [None] * len(counts)
         # the instance records' BLAS roots: the binary root (in the header) or the wide root
         roots = [w.node_base for w in wide] if self.wide else [-1] * len(counts)
@@ -319,8 +357,11 @@ class Scene:
         self._trace_blas = ((wide[0].nodes, wide[0].blocks) if self.wide and wide
                             else (self.blas_nodes, self.blas_tris))
         node_base = tri_base = 0
+        self._hf_done = False
         for i, rec in enumerate(self.meshes):
             rec.node_base, rec.tri_base = node_base, tri_base
+            if rec.grid is not None:
+                continue
             storage = BlasStorage(self.blas_nodes, node_base, self.blas_tris, tri_base,
                                   self.blas_infos, i)
             rec.blas = Blas(rt, rec.vertices_buf, rec.triangles_buf, rec.n_vertices,
@@ -328,7 +369,7 @@ class Scene:
                             wide=wide[i], stage=f"{self.stage}.blas")
             node_base += node_count(rec.n_triangles)
             tri_base += rec.n_triangles
-        self._storage_tris = n_tris
+        self._storage_tris = sum(m.n_triangles for m in self.meshes)
         self._tlas_n = -1  # the TLAS kernels bind the BLAS headers: rebind them
 
     def _init_empty_tlas(self) -> None:
@@ -429,7 +470,7 @@ class Scene:
         return {"tlas_info": self.tlas_info, "tlas_nodes": self.tlas_nodes,
                 "tlas_prims": self.tlas_prims, "instances": self.instances,
                 "blas_nodes": self._trace_blas[0], "blas_tris": self._trace_blas[1],
-                "trace_stats": self.trace_stats}
+                **self.heightfield.bindings(), "trace_stats": self.trace_stats}
 
     def coop_redos(self) -> int:
         """Cooperative walks (kernels/traverse_coop.h) traced again serially because their local
@@ -450,6 +491,11 @@ class Scene:
                     raise ValueError(f"mesh {i}: {n_bad} triangles have a NaN or infinite vertex "
                                      "coordinate")
                 bad += n_bad
+        if self.heightfield.mesh is not None and self._storage_tris >= 0:
+            n_bad = int(self.heightfield.read()["n_bad"])
+            if n_bad:
+                raise ValueError(f"mesh {self.heightfield.mesh}: {n_bad} grid vertices are NaN, "
+                                 "infinite or off the regular grid")
         if stats[TRACE_STAT_OVERFLOW]:
             raise ValueError(f"traversal stack overflowed {int(stats[TRACE_STAT_OVERFLOW])} "
                              "times: hits may be missing")
