@@ -67,6 +67,9 @@ def add_arguments(p) -> None:
     p.add_argument("--rebuild", action="store_true",
                    help="rebuild the water BVH every frame instead of refitting it (implies "
                         "--water-accel bvh)")
+    p.add_argument("--frames-in-flight", type=int, default=2,
+                   help="frames queued before the loop waits for the oldest one's image "
+                        "(World frames_in_flight, 1-8; the window keeps 2)")
     p.add_argument("--water-accel", choices=("grid", "bvh"), default=None,
                    help="how rays find the water: grid (its cells walked as a height field, "
                         "the default) or bvh (an LBVH refitted each frame)")
@@ -144,7 +147,8 @@ def run(args) -> int:
     for cells in args.cells:
         world = World(scene, rt, width=args.size[0], height=args.size[1], cells=cells,
                       rebuild_water_bvh=args.rebuild, caustics=args.caustics,
-                      water_accel=getattr(args, "water_accel", None))
+                      water_accel=getattr(args, "water_accel", None),
+                      frames_in_flight=getattr(args, "frames_in_flight", 2))
         if getattr(args, "per_depth", False):
             world.renderer.set_stage_per_depth(True)
         world.renderer.set_overlap(not getattr(args, "no_overlap", False), overlap_from)
@@ -197,6 +201,7 @@ def run(args) -> int:
                "triangles": st.n_triangles, "width": args.size[0],
                "height": args.size[1], "lbm_steps_per_frame": round(statistics.mean(steps), 3),
                "water_accel": world.water_accel,
+               "frames_in_flight": getattr(args, "frames_in_flight", 2),
                "bvh": ("rebuild" if args.rebuild else "refit") if world.water_accel == "bvh"
                else "none", "host_copy": host_copy,
                "overlap": world.renderer.settings.overlap_levels,

@@ -37,6 +37,9 @@ from raytrace.sort import make_sorter
 TRANSFORM_DTYPE = np.dtype([("r0", np.float32, 4), ("r1", np.float32, 4),
                             ("r2", np.float32, 4)])
 TLAS_LEAF_SIZE = 1
+#: Most instances whose TLAS is built in one launch by one work-group (kernels/bvh_tlas.cl
+#: tlas_build_one_group; the five-launch build above it).
+TLAS_ONE_LAUNCH = 256
 #: An instance's default visibility mask (kernels/bvh.h Instance.mask): every ray sees it.
 MASK_ALL = 0xFFFFFFFF
 TRACE_STAT_OVERFLOW = 0
@@ -132,6 +135,8 @@ class Scene:
         self._reset = rt.kernel_launcher("bvh_build.cl", "bvh_reset_info",
                                          stage=f"{stage}.tlas.reset")
         self._reset.bind(infos=self.tlas_info, info_index=0, n_prims=0).set_size(1)
+        #: TLASes of at most this many instances are built in one launch (TLAS_ONE_LAUNCH)
+        self.tlas_one_launch = TLAS_ONE_LAUNCH
         #: the grid mesh traced as a height field, if any (raytrace.heightfield)
         self.heightfield = HeightField(rt, stage)
         self._init_empty_tlas()
@@ -417,13 +422,21 @@ class Scene:
             info=self.tlas_info).set_size(n, 64)
         self._tlas_sorter = make_sorter(rt, self._tlas_keys, self.tlas_prims, n,
                                         stage=f"{st}.sort")
+        self._tlas_one = kernel("tlas_build_one_group", "build").bind(
+            n_inst=n, xforms=self.transform_buffer, inst_mesh=self._inst_mesh_dev,
+            mesh_prim_base=self.mesh_prim_base, blas_infos=self.blas_infos,
+            mesh_wide_root=self.mesh_wide_root, wide=int(self.wide),
+            inst_mask=self._inst_mask_dev, instances=self.instances,
+            normals=self.normal_buffer, boxes=self._tlas_boxes, keys=self._tlas_keys,
+            order=self.tlas_prims, nodes=self.tlas_nodes, flags=self._tlas_flags,
+            info=self.tlas_info).set_size(BOUNDS_WG, BOUNDS_WG)
         self._tlas_n = n
 
     def _build_tlas(self) -> None:
         n = self.n_instances
-        self._reset.bind(n_prims=n)
-        self._reset()  # root = -1: an empty scene misses
         if n == 0:
+            self._reset.bind(n_prims=0)
+            self._reset()  # root = -1: an empty scene misses
             return
         if n != self._tlas_n:
             self._allocate_tlas(n)
@@ -432,6 +445,11 @@ class Scene:
                                          np.array(self._inst_masks, np.uint32),
                                          is_blocking=False))
             self._masks_dirty = False
+        if n <= self.tlas_one_launch:
+            self._tlas_one()
+            return
+        self._reset.bind(n_prims=n)
+        self._reset()
         self._prep()
         self._morton()
         self._tlas_sorter.enqueue()
