@@ -4,7 +4,9 @@ For each grid n x n (``--sizes``), bed kind (``--variants``: flat, bed) and work
 (``--local-sizes``): ``--repeats`` chains of ``--steps`` fused steps enqueued back to back with no
 host sync (after one warm-up chain), timed by OpenCL events. Reported medians:
 
-* ``step_ms``: kernel time per step (mean event duration in a chain); ``mlups`` = n^2 / step_ms
+* ``step_ms``: kernel time per step (the chain's event durations over its steps); ``mlups`` =
+  n^2 / step_ms. With ``--steps-per-launch 2`` a launch takes two steps (``lbm_step2``, one read
+  and one write of the grid per two steps: ``bytes_per_cell`` counts them once per launch)
 * ``chain_ms``: first start to last end of a chain, per step (adds the gaps between launches)
 * ``bytes_per_cell`` from first principles: 9 fp32 loads + 9 fp32 stores = 72 B on a flat bed;
   the uneven bed adds the depth at t and the bed (neighbours from cache) and the new depth: 84 B
@@ -92,6 +94,18 @@ def _local_sizes(text: str) -> list[tuple[int, int] | None]:
     return out
 
 
+def _spl_list(text: str) -> list[int]:
+    import argparse
+
+    try:
+        vals = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        vals = []
+    if not vals or any(v not in (1, 2) for v in vals):
+        raise argparse.ArgumentTypeError(f"--steps-per-launch {text!r}: a list of 1 and/or 2")
+    return vals
+
+
 def _variants(text: str) -> list[str]:
     import argparse
 
@@ -129,6 +143,9 @@ def add_arguments(p) -> None:
     p.add_argument("--local-sizes", type=_local_sizes, default=None,
                    help="work-groups of the step kernel to compare, e.g. 128x1,256x1,32x4,auto "
                         "(default: the solver's choice)")
+    p.add_argument("--steps-per-launch", type=_spl_list, default=None,
+                   help="steps per launch to compare, e.g. 1,2 (2: lbm_step2, two steps in "
+                        "local memory; default: the solver's choice)")
     p.add_argument("--bandwidth-mib", type=_positive, default=None,
                    help="bytes copied by the bandwidth measurement, MiB (>= 256 for the record; "
                         f"default: GPU {GPU_DEFAULTS['bandwidth_mib']}, "
@@ -171,12 +188,14 @@ def check_step(rt, variant: str, local_size) -> float:
     return float(np.abs(sim.populations() - want).max())
 
 
-def bench_one(rt, n: int, variant: str, local_size, steps: int, repeats: int) -> dict:
+def bench_one(rt, n: int, variant: str, local_size, steps: int, repeats: int,
+              steps_per_launch: int | None = None) -> dict:
     import lbm
 
     dx = 1.0 / n
     sim = lbm.ShallowWater(n, n, dx, device=rt, local_size=local_size,
-                           guard_interval=10**9, checkpoint_interval=1)
+                           guard_interval=10**9, checkpoint_interval=1,
+                           steps_per_launch=steps_per_launch)
     h, bed = _state(n, dx, variant)
     sim.set_state(h, bed=bed)
     m0 = sim.stats()["mass"]
@@ -203,13 +222,13 @@ def bench_one(rt, n: int, variant: str, local_size, steps: int, repeats: int) ->
     lups = n * n / (step_ms * 1e-3)
     return {
         "n": n, "cells": n * n, "variant": variant,
-        "local_size": _ls_name(local_size),
+        "local_size": _ls_name(local_size), "steps_per_launch": sim.steps_per_launch,
         "steps": steps, "repeats": repeats,
         "step_ms": step_ms, "step_ms_min": float(np.min(kernel)),
         "chain_ms": float(np.median(span)),
         "mlups": lups / 1e6, "chain_mlups": n * n / (float(np.median(span)) * 1e-3) / 1e6,
-        "bytes_per_cell": BYTES_PER_CELL[variant],
-        "gbps": BYTES_PER_CELL[variant] * lups / 1e9,
+        "bytes_per_cell": BYTES_PER_CELL[variant] / sim.steps_per_launch,
+        "gbps": BYTES_PER_CELL[variant] / sim.steps_per_launch * lups / 1e9,
         "guard_ms": float(np.median(guard[1:])), "surface_ms": float(np.median(surface[1:])),
         "mass_drift": abs(s["mass"] - m0) / m0, "guard_report": s["report"],
         "e": sim.e, "dt": sim.dt, "tau": sim.tau,
@@ -225,6 +244,7 @@ def run(args) -> int:
     rt = get_runtime(args.device)
     apply_device_defaults(args, rt.is_gpu)
     local_sizes = args.local_sizes or [None]
+    launches = args.steps_per_launch or [None]
     out = Path(args.out)
     print(f"lbm bench on {rt.name} ({rt.device.platform.name.strip()}): sizes "
           f"{_csv(args.sizes)}, {args.steps} steps x {args.repeats} chains; writing "
@@ -247,15 +267,16 @@ def run(args) -> int:
     rows = []
     for n in args.sizes:
         for variant in args.variants:
-            for ls in local_sizes:
+            for ls, spl in ((ls, spl) for ls in local_sizes for spl in launches):
                 t0 = time.perf_counter()
-                r = bench_one(rt, n, variant, ls, args.steps, args.repeats)
+                r = bench_one(rt, n, variant, ls, args.steps, args.repeats, spl)
                 r["of_ceiling"] = r["gbps"] / copy_gbps
                 r["of_72B_ceiling"] = r["mlups"] * 1e6 / (copy_gbps * 1e9 / 72)
                 r["ok"] = r["mass_drift"] <= 1e-5 and r["guard_report"] == "ok"
                 failed |= not r["ok"]
                 rows.append(r)
-                print(f"{n:5d}^2 {variant:4s} {r['local_size']:>7s}: {r['step_ms']:.4f} ms/step "
+                print(f"{n:5d}^2 {variant:4s} {r['local_size']:>7s} x{r['steps_per_launch']}: "
+                      f"{r['step_ms']:.4f} ms/step "
                       f"{r['mlups']:9.1f} MLUPs {r['gbps']:7.1f} GB/s "
                       f"{100 * r['of_ceiling']:5.1f}% of copy (72 B: "
                       f"{100 * r['of_72B_ceiling']:5.1f}%), chain {r['chain_ms']:.4f} ms, "

@@ -66,6 +66,7 @@ class Options:
     guard_interval: int = 100        # steps between guard checks inside one step(n) call
     checkpoint_interval: int = 500   # steps between checkpoint saves (only of clean states)
     local_size: tuple[int, int] | None = None  # work-group of the step kernel; None: device's
+    steps_per_launch: int | None = None  # 2: lbm_step2 (two steps per launch); None: 2 on a GPU
 
     @classmethod
     def from_kwargs(cls, **kw) -> Options:
@@ -86,6 +87,7 @@ class Options:
         _num("max_speed_ratio", o.max_speed_ratio, 0.0, 0.7, lo_open=True)
         _num("guard_interval", o.guard_interval, 1, 10**9, integer=True)
         _num("checkpoint_interval", o.checkpoint_interval, 1, 10**9, integer=True)
+        _num("steps_per_launch", o.steps_per_launch, 1, 2, integer=True, allow_none=True)
         if o.local_size is not None:
             ls = o.local_size
             if (not isinstance(ls, tuple | list) or len(ls) != 2

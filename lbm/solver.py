@@ -64,6 +64,19 @@ class Storage(IntEnum):
         return 2 if self is Storage.FP16S else 4
 
 
+#: lbm_step2's work-group (LBM_TILE_X x LBM_TILE_Y in kernels/lbm_step.cl): one tile of cells.
+STEP2_TILE = (32, 8)
+
+
+def step2_local_bytes(storage: Storage, bed: bool, guard: bool) -> int:
+    """Local memory of one lbm_step2 work-group: its tile with a halo of two cells (the state
+    loaded) and of one (the first step's state), each cell's populations, with ``bed`` its depth
+    and bed, with ``guard`` its damping mark."""
+    n0 = (STEP2_TILE[0] + 4) * (STEP2_TILE[1] + 4)
+    n1 = (STEP2_TILE[0] + 2) * (STEP2_TILE[1] + 2)
+    return (n0 + n1) * (9 * storage.bytes + 8 * bed + guard)
+
+
 class GuardAction(IntEnum):
     """LBM_GUARD_* in kernels/lbm.h."""
 
@@ -130,6 +143,8 @@ class ShallowWater:
                 raise ValueError(f"{name}={v!r} must be an integer in [3, 65536]")
         self.nx, self.ny = int(nx), int(ny)
         self._step_size = (self.nx, self.ny)
+        self._step2_size = tuple(-(-v // t) * t
+                                 for v, t in zip(self._step_size, STEP2_TILE, strict=True))
         self.dx = _finite("dx", dx)
         if self.dx <= 0:
             raise ValueError(f"dx={dx!r} must be > 0 (cell size in metres)")
@@ -141,6 +156,7 @@ class ShallowWater:
         self._defines = {"LBM_GUARD": int(guard), "LBM_FP16S": int(self.storage)}
         self.options = Options.from_kwargs(**options)
         self.rt: Runtime = device if isinstance(device, Runtime) else get_runtime(device)
+        self.steps_per_launch = self._choose_steps_per_launch()
         n = self.n_cells = self.nx * self.ny
         check_grid(self.rt, self.nx, self.ny)  # 32-bit indices and device memory (lbm.limits)
         fb = 9 * self.storage.bytes * n
@@ -187,31 +203,53 @@ class ShallowWater:
         self.set_state(np.full((self.ny, self.nx), d))
 
     # -- construction helpers ---------------------------------------------------------------
+    def _choose_steps_per_launch(self) -> int:
+        """The option, or 2 on a GPU whose work-groups hold lbm_step2's tile (1 on a CPU, where
+        the halo's second computation costs more than the memory traffic it saves)."""
+        dev, want = self.rt.device, self.options.steps_per_launch
+        need = step2_local_bytes(self.storage, True, self.guard)
+        tile = STEP2_TILE[0] * STEP2_TILE[1]
+        fits = dev.local_mem_size >= need and dev.max_work_group_size >= tile
+        if want == 2 and not fits:
+            raise ValueError(f"option steps_per_launch=2 needs {need} B of local memory and "
+                             f"work-groups of {tile}; the device has {dev.local_mem_size} B and "
+                             f"{dev.max_work_group_size}")
+        if want is None:
+            return 2 if self.rt.is_gpu and fits else 1
+        return want
+
     def _kernel(self, source: str, name: str, stage: str, defines: dict | None = None):
         """A :class:`kernels.launch.Kernel` (arguments bound by name, timed as ``stage``)."""
         return self.rt.kernel_launcher(source, name, stage=stage,
                                        defines={**self._defines, **(defines or {})})
 
     def _step_kernels(self, uneven: bool) -> tuple:
-        """The fused step for the current walls and bed kind, bound for both parities."""
-        pair = self._k_steps.get(uneven)
-        if pair is None:
+        """The fused steps for the current walls and bed kind, each bound for both parities:
+        ((lbm_step, lbm_step), (lbm_step2, lbm_step2) or None)."""
+        pairs = self._k_steps.get(uneven)
+        if pairs is None:
             defines = {"LBM_BOUNDARY": int(self.boundary), "LBM_BED": int(uneven)}
-            pair = (self._kernel("lbm_step.cl", "lbm_step", "lbm.step", defines),
-                    self._kernel("lbm_step.cl", "lbm_step", "lbm.step", defines))
-            self._k_steps[uneven] = pair
-        return pair
+            one = tuple(self._kernel("lbm_step.cl", "lbm_step", "lbm.step", defines)
+                        for _ in range(2))
+            two = None
+            if self.steps_per_launch == 2:
+                defines.update(LBM_TILE_X=STEP2_TILE[0], LBM_TILE_Y=STEP2_TILE[1])
+                two = tuple(self._kernel("lbm_step.cl", "lbm_step2", "lbm.step", defines)
+                            for _ in range(2))
+            pairs = self._k_steps[uneven] = (one, two)
+        return pairs
 
     def _bind_steps(self) -> None:
         """Bind both parities once: parity 0 reads f.current, parity 1 reads f.other."""
-        a, b = self._step_kernels(self._uneven or self._zforce is not self._bed)
+        one, two = self._step_kernels(self._uneven or self._zforce is not self._bed)
         f, h, m = self._f, self._h, self._mark
-        for k, (fs, fd, hs, hd, ms, md) in (
-                (a, (f.current, f.other, h.current, h.other, m.current, m.other)),
-                (b, (f.other, f.current, h.other, h.current, m.other, m.current))):
-            k.bind(f_src=fs, f_dst=fd, h_src=hs, h_dst=hd, bed=self._zforce, mark_src=ms,
-                   mark_dst=md, p=self._params, guard=self._guard)
-        self._k_step_pair = (a, b)
+        for pair in (one, two or ()):
+            for k, (fs, fd, hs, hd, ms, md) in zip(pair, (
+                    (f.current, f.other, h.current, h.other, m.current, m.other),
+                    (f.other, f.current, h.other, h.current, m.other, m.current)), strict=True):
+                k.bind(f_src=fs, f_dst=fd, h_src=hs, h_dst=hd, bed=self._zforce, mark_src=ms,
+                       mark_dst=md, p=self._params, guard=self._guard)
+        self._k_step_pair, self._k_step2_pair = one, two
 
     def add_step_hook(self, hook) -> None:
         """Call ``hook(dt)`` after every step of :meth:`step` (it must only enqueue): how
@@ -413,9 +451,12 @@ class ShallowWater:
             return tuple(self.options.local_size)
         return (128, 1) if self.rt.is_gpu else None
 
-    def _enqueue_step(self) -> cl.Event:
-        k = self._k_step_pair[self._parity]
-        evt = k.launch(self._step_size, self._local_size())
+    def _enqueue_step(self, two: bool = False) -> cl.Event:
+        """One lbm_step launch, or with ``two`` one lbm_step2 launch (two time steps)."""
+        if two:
+            evt = self._k_step2_pair[self._parity].launch(self._step2_size, STEP2_TILE)
+        else:
+            evt = self._k_step_pair[self._parity].launch(self._step_size, self._local_size())
         self._f.swap()
         self._h.swap()
         self._mark.swap()
@@ -423,11 +464,16 @@ class ShallowWater:
         return evt
 
     def enqueue_steps(self, n: int) -> list[cl.Event]:
-        """``n`` bare fused steps, no rain and no guard check, returning their events: for
-        benchmarks timing a chain of launches. A frame calls :meth:`step`."""
+        """``n`` bare fused steps (in pairs where :attr:`steps_per_launch` is 2), no rain and no
+        guard check, returning their events: for benchmarks timing a chain of launches. A frame
+        calls :meth:`step`."""
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
             raise ValueError(f"enqueue_steps: n={n!r} must be an integer >= 1")
-        events = [self._enqueue_step() for _ in range(int(n))]
+        events, left = [], int(n)
+        while left > 0:
+            two = self._k_step2_pair is not None and left >= 2
+            events.append(self._enqueue_step(two))
+            left -= 1 + two
         self.time += n * self.dt
         self.steps += n
         self._since_check += n
@@ -443,20 +489,31 @@ class ShallowWater:
         if n == 0:
             return
         interval = self.options.guard_interval
-        for _ in range(int(n)):
+        left = int(n)
+        while left > 0:
             if self._rain is not None:
                 self._rain_due(self.time + self.dt)
-            self._enqueue_step()
-            for hook in self._step_hooks:
-                hook(self.dt)
-            self.time += self.dt
-            self.steps += 1
-            self._since_check += 1
-            self._since_save += 1
+            two = left >= 2 and self._two_steps_free(interval)
+            self._enqueue_step(two)
+            for _ in range(1 + two):
+                for hook in self._step_hooks:
+                    hook(self.dt)
+                self.time += self.dt
+                self.steps += 1
+                self._since_check += 1
+                self._since_save += 1
+            left -= 1 + two
             if self._since_check >= interval:
                 self._check_due()
         if self._since_check > 0:
             self._check_due()
+
+    def _two_steps_free(self, interval: int) -> bool:
+        """Whether the next two steps may run as one lbm_step2 launch: nothing is due between
+        them (no step hook, no guard check, no rain drop: the same state as two launches)."""
+        if self._k_step2_pair is None or self._step_hooks or self._since_check + 1 >= interval:
+            return False
+        return self._rain is None or self._rain.next_time >= (self.time + self.dt) + self.dt
 
     def _check_due(self) -> None:
         save = SaveRequest.NO
