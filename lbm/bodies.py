@@ -381,7 +381,7 @@ class Boats:
         self._upload()
         self.coupled = bool(coupled)
         if self.coupled:
-            sim.add_step_hook(self._water_step)
+            sim.add_step_hook(self._water_step, self._quiet_steps)
 
     def close(self) -> None:
         """Stop following the water (removes the step hook)."""
@@ -586,6 +586,11 @@ class Boats:
     def every(self) -> int:
         """Water steps per coupled update: the most whose time fits in ``max_substep``, >= 1."""
         return max(1, int(self.max_substep / self.sim.dt * (1 + 1e-9)))
+
+    def _quiet_steps(self) -> int:
+        """How many of the coming steps' hook calls only count (the call that completes
+        :attr:`every` steps updates the boats)."""
+        return max(0, self.every - self._held_steps - 1)
 
     def _water_step(self, dt: float) -> None:
         """The step hook: the boats are updated once :attr:`every` water steps have passed."""

@@ -66,7 +66,7 @@ class Options:
     guard_interval: int = 100        # steps between guard checks inside one step(n) call
     checkpoint_interval: int = 500   # steps between checkpoint saves (only of clean states)
     local_size: tuple[int, int] | None = None  # work-group of the step kernel; None: device's
-    steps_per_launch: int | None = None  # 2: lbm_step2 (two steps per launch); None: 2 on a GPU
+    steps_per_launch: int | None = None  # 2: lbm_step2 (two steps a launch); None: the device's
 
     @classmethod
     def from_kwargs(cls, **kw) -> Options:

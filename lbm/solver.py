@@ -156,7 +156,7 @@ class ShallowWater:
         self._defines = {"LBM_GUARD": int(guard), "LBM_FP16S": int(self.storage)}
         self.options = Options.from_kwargs(**options)
         self.rt: Runtime = device if isinstance(device, Runtime) else get_runtime(device)
-        self.steps_per_launch = self._choose_steps_per_launch()
+        self._step2_allowed = self._check_steps_per_launch()
         n = self.n_cells = self.nx * self.ny
         check_grid(self.rt, self.nx, self.ny)  # 32-bit indices and device memory (lbm.limits)
         fb = 9 * self.storage.bytes * n
@@ -196,16 +196,16 @@ class ShallowWater:
         self._reported = np.zeros(1, GUARD_DTYPE)  # counters at the last stats() call
         self._rain: _Rain | None = None
         self._rain_seed = None
-        self._step_hooks: list = []   # called after every step of step(n): coupled bodies
+        self._step_hooks: dict = {}   # hook -> quiet_steps: called after every step of step(n)
         self.time = 0.0
         self.steps = 0
         d = self.options.depth
         self.set_state(np.full((self.ny, self.nx), d))
 
     # -- construction helpers ---------------------------------------------------------------
-    def _choose_steps_per_launch(self) -> int:
-        """The option, or 2 on a GPU whose work-groups hold lbm_step2's tile (1 on a CPU, where
-        the halo's second computation costs more than the memory traffic it saves)."""
+    def _check_steps_per_launch(self) -> bool:
+        """Whether lbm_step2 may run: the option allows it and the device's work-groups hold
+        its tile (an explicit steps_per_launch=2 on a device that cannot is an error)."""
         dev, want = self.rt.device, self.options.steps_per_launch
         need = step2_local_bytes(self.storage, True, self.guard)
         tile = STEP2_TILE[0] * STEP2_TILE[1]
@@ -214,9 +214,21 @@ class ShallowWater:
             raise ValueError(f"option steps_per_launch=2 needs {need} B of local memory and "
                              f"work-groups of {tile}; the device has {dev.local_mem_size} B and "
                              f"{dev.max_work_group_size}")
-        if want is None:
-            return 2 if self.rt.is_gpu and fits else 1
-        return want
+        return want != 1 and fits
+
+    def _wants_step2(self, uneven: bool) -> bool:
+        """Two steps per launch: as the option says, or by default on a GPU for the uneven bed
+        only. Measured on an H200 (BENCHMARKS.md, sixth session): at 1024x768 cells lbm_step2
+        takes 10% less time over an uneven bed and 4% more over a flat one, whose step is
+        lighter; on a CPU it is 13-29% slower (the halo's second computation)."""
+        if not self._step2_allowed:
+            return False
+        return self.options.steps_per_launch == 2 or (self.rt.is_gpu and uneven)
+
+    @property
+    def steps_per_launch(self) -> int:
+        """2 while the step runs as lbm_step2 (two time steps per launch), else 1."""
+        return 2 if self._k_step2_pair is not None else 1
 
     def _kernel(self, source: str, name: str, stage: str, defines: dict | None = None):
         """A :class:`kernels.launch.Kernel` (arguments bound by name, timed as ``stage``)."""
@@ -232,7 +244,7 @@ class ShallowWater:
             one = tuple(self._kernel("lbm_step.cl", "lbm_step", "lbm.step", defines)
                         for _ in range(2))
             two = None
-            if self.steps_per_launch == 2:
+            if self._wants_step2(uneven):
                 defines.update(LBM_TILE_X=STEP2_TILE[0], LBM_TILE_Y=STEP2_TILE[1])
                 two = tuple(self._kernel("lbm_step.cl", "lbm_step2", "lbm.step", defines)
                             for _ in range(2))
@@ -243,7 +255,7 @@ class ShallowWater:
         """Bind both parities once: parity 0 reads f.current, parity 1 reads f.other."""
         one, two = self._step_kernels(self._uneven or self._zforce is not self._bed)
         f, h, m = self._f, self._h, self._mark
-        for pair in (one, two or ()):
+        for pair in (one, two) if two else (one,):
             for k, (fs, fd, hs, hd, ms, md) in zip(pair, (
                     (f.current, f.other, h.current, h.other, m.current, m.other),
                     (f.other, f.current, h.other, h.current, m.other, m.current)), strict=True):
@@ -251,16 +263,17 @@ class ShallowWater:
                        mark_dst=md, p=self._params, guard=self._guard)
         self._k_step_pair, self._k_step2_pair = one, two
 
-    def add_step_hook(self, hook) -> None:
+    def add_step_hook(self, hook, quiet_steps=None) -> None:
         """Call ``hook(dt)`` after every step of :meth:`step` (it must only enqueue): how
-        floating bodies (:class:`lbm.bodies.Boats`) follow the water step by step."""
-        if not callable(hook):
-            raise ValueError("add_step_hook: hook must be callable")
-        self._step_hooks.append(hook)
+        floating bodies (:class:`lbm.bodies.Boats`) follow the water step by step.
+        ``quiet_steps()``, if given, says after how many of the coming steps the hook will only
+        count, enqueueing nothing: two such steps may run as one launch (lbm_step2)."""
+        if not callable(hook) or not (quiet_steps is None or callable(quiet_steps)):
+            raise ValueError("add_step_hook: hook and quiet_steps must be callable")
+        self._step_hooks[hook] = quiet_steps
 
     def remove_step_hook(self, hook) -> None:
-        if hook in self._step_hooks:
-            self._step_hooks.remove(hook)
+        self._step_hooks.pop(hook, None)
 
     def pressure_head_buffer(self) -> cl.Buffer:
         """The device buffer (nx*ny float32, m) that the step's bed force reads as the bed: the
@@ -496,7 +509,7 @@ class ShallowWater:
             two = left >= 2 and self._two_steps_free(interval)
             self._enqueue_step(two)
             for _ in range(1 + two):
-                for hook in self._step_hooks:
+                for hook in list(self._step_hooks):
                     hook(self.dt)
                 self.time += self.dt
                 self.steps += 1
@@ -510,8 +523,10 @@ class ShallowWater:
 
     def _two_steps_free(self, interval: int) -> bool:
         """Whether the next two steps may run as one lbm_step2 launch: nothing is due between
-        them (no step hook, no guard check, no rain drop: the same state as two launches)."""
-        if self._k_step2_pair is None or self._step_hooks or self._since_check + 1 >= interval:
+        them (no step hook that acts, no guard check, no rain drop: the state of two launches)."""
+        if self._k_step2_pair is None or self._since_check + 1 >= interval:
+            return False
+        if any(quiet is None or quiet() < 1 for quiet in self._step_hooks.values()):
             return False
         return self._rain is None or self._rain.next_time >= (self.time + self.dt) + self.dt
 

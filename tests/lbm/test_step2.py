@@ -124,23 +124,57 @@ def test_step_loop_groups_around_drops_and_checks(rt):
 
 
 def test_step_hooks_run_every_step(rt):
-    """A step hook (floating bodies) sees every step: no pairs while one is registered."""
+    """A step hook sees every step; steps are paired only where every hook says its coming
+    call only counts (quiet_steps)."""
     sim = _sim(rt, 40, 20, 2)
     sim.set_state(np.full((20, 40), 0.5))
-    calls, seen = _spy(sim), []
+    calls, seen, quiet = _spy(sim), [], [0]
     sim.add_step_hook(seen.append)
     sim.step(6)
     assert calls == [False] * 6 and len(seen) == 6
     sim.remove_step_hook(seen.append)
+    sim.add_step_hook(seen.append, lambda: quiet[0])
+    sim.step(2)
+    quiet[0] = 1
+    sim.step(4)
+    assert calls[6:] == [False, False, True, True] and len(seen) == 12
+    sim.remove_step_hook(seen.append)
     sim.step(6)
-    assert calls[6:] == [True] * 3
+    assert calls[10:] == [True] * 3 and len(seen) == 12
+
+
+def test_coupled_boats_see_the_same_water(rt):
+    """Boats updated every 3 water steps (a hook that acts on every third call): pairs run
+    between their updates, and water, boats and transform rows are the bytes of one step per
+    launch."""
+    from lbm.bodies import Boats, BoatSpec
+    from tests.lbm import bodies_ref as br
+
+    out = []
+    for spl in (1, 2):
+        sim = br.pool(rt, dx=0.05, size=(2.0, 1.0), drag=0.0, steps_per_launch=spl)
+        spec = BoatSpec(*br.box(0.5, 0.3, 0.3), mass=12.0, position=(0.6, 0.52, 0.5),
+                        mass_height=0.08)
+        rows = rt.buffer(48)
+        boats = Boats(sim, [spec], rows, [0], max_substep=3 * sim.dt * (1 + 1e-6))
+        boats.set_velocity(0, (2.0, 0.0, 0.3))
+        calls = _spy(sim)
+        sim.step(20)
+        out.append((sim.populations().tobytes(), boats.state().tobytes(),
+                    rt.to_host(rows, np.float32, 12).tobytes()))
+    assert boats.every == 3 and True in calls and False in calls
+    assert out[0] == out[1]
 
 
 def test_steps_per_launch_option(rt):
+    """1 or 2; by default two steps per launch on a GPU over an uneven bed only."""
     with pytest.raises(ValueError, match=r"steps_per_launch=3 is out of range; allowed \[1, 2\]"):
         _sim(rt, 16, 16, 3)
-    default = lbm.ShallowWater(16, 16, DX, device=rt)
-    assert default.steps_per_launch == (2 if rt.is_gpu else 1)
+    sim = lbm.ShallowWater(16, 16, DX, device=rt)
+    assert sim.steps_per_launch == 1
+    sim.set_state(np.full((16, 16), 0.8), bed=np.full((16, 16), 0.1) + np.eye(16) * 0.05)
+    assert sim.steps_per_launch == (2 if rt.is_gpu else 1)
+    assert _sim(rt, 16, 16, 2).steps_per_launch == 2
     need = step2_local_bytes(Storage.FP32, True, True)
     assert need == (36 * 12 + 34 * 10) * (36 + 8 + 1)
     assert need <= 48 * 1024    # fits the local memory of NVIDIA's OpenCL work-groups

@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-02 (sixth session)" rows: two LBM
+# steps per launch (lbm_step2) against one, its tile's shape, and the frame tables. Usage:
+#   bench/h200_session6.sh OUTDIR PART
+# PART lbm: the LBM's device tests (lbm_step2 against lbm_step bit for bit, the reference), then
+#   bench lbm with one and two steps per launch, and lbm_step2's tile A/B (copies of the tree
+#   with STEP2_TILE changed); PART frame: the frame's device tests, then issue 9's baseline scene
+#   and the pool at 1080p (per depth too) and 4K, real-time water, the water's BVH, each with one
+#   step per launch beside (a copy of the tree whose default is 1).
+# The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+set -uo pipefail
+out=${1:?OUTDIR}
+part=${2:?PART}
+mkdir -p "$out"
+lb() { python3 -m app.cli "$@"; }
+f="--cells 1024 --size 1920 1080 --frames 40"
+k="--cells 1024 --size 3840 2160 --frames 20"
+static="--scene bench/scenes/pool_static_boat.toml"
+variant_tree() {   # variant_tree DIR SED FILE [SED FILE ...]: a copy of the tree with edits
+    local w=$1; shift
+    rm -rf "$w" && mkdir -p "$w" && cp -r app kernels lbm raytrace scenes bench tests "$w"/
+    while [ $# -gt 1 ]; do
+        sed -i "$1" "$w/$2"
+        cmp -s "$2" "$w/$2" && echo "$w: $2 unchanged"
+        shift 2
+    done
+}
+in_tree() { local w=$1; shift; (cd "$w" && PYTHONPATH=/tmp/site:$w python3 -m app.cli "$@"); }
+one_step() { variant_tree /tmp/spl1 \
+    "s/return 2 if self.rt.is_gpu and fits else 1/return 1/" lbm/solver.py; }
+case $part in
+lbm)
+    timeout 240 python3 -m pytest -q -p no:cacheprovider tests/lbm/test_step2.py \
+        tests/lbm/test_kernels.py tests/lbm/test_exact_volume.py tests/lbm/test_bodies_fast.py \
+        2>&1 | tail -3
+    lb bench lbm --sizes 1024,2048 --steps-per-launch 1,2 --out "$out/lbm" 2>&1 | grep -v "^$"
+    for t in "32, 4" "64, 4" "16, 16"; do
+        w=/tmp/tile${t//[, ]/}
+        variant_tree "$w" "s/^STEP2_TILE = (32, 8)$/STEP2_TILE = ($t)/" lbm/solver.py
+        in_tree "$w" bench lbm --sizes 1024 --steps-per-launch 2 --out "$out/tile${t//[, ]/x}" \
+            2>&1 | grep "x2:"
+    done
+    ;;
+frame)
+    timeout 300 python3 -m pytest -q -p no:cacheprovider tests/lbm/test_step2.py \
+        tests/raytrace/test_heightfield.py tests/app/test_frame_pipeline.py 2>&1 | tail -3
+    one_step
+    for rep in 1 2; do
+        lb bench frame $f $static --out "$out/static_$rep" | tail -1
+        in_tree /tmp/spl1 bench frame $f $static --out "$out/static_spl1_$rep" | tail -1
+        lb bench frame $f --out "$out/pool_$rep" | tail -1
+        in_tree /tmp/spl1 bench frame $f --out "$out/pool_spl1_$rep" | tail -1
+    done
+    lb bench frame $f $static --per-depth --out "$out/static_pd" | tail -1
+    in_tree /tmp/spl1 bench frame $f $static --per-depth --out "$out/static_pd_spl1" | tail -1
+    lb bench frame $f --per-depth --out "$out/pool_pd" | tail -1
+    lb bench frame $k $static --out "$out/static4k" | tail -1
+    in_tree /tmp/spl1 bench frame $k $static --out "$out/static4k_spl1" | tail -1
+    lb bench frame $k --out "$out/pool4k" | tail -1
+    lb bench frame $f $static --frame-time 0.0025 --out "$out/static_rt" | tail -1
+    lb bench frame $f --frame-time 0.0025 --out "$out/pool_rt" | tail -1
+    lb bench frame $f $static --water-accel bvh --out "$out/static_bvh" | tail -1
+    lb bench frame $f $static --no-profiling --out "$out/static_noprof" | tail -1
+    ;;
+*) echo "unknown part $part"; exit 2 ;;
+esac
+exit 0
