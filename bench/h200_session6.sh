@@ -6,7 +6,10 @@
 #   bench lbm with one and two steps per launch, and lbm_step2's tile A/B (copies of the tree
 #   with STEP2_TILE changed); PART frame: the frame's device tests, then issue 9's baseline scene
 #   and the pool at 1080p (per depth too) and 4K, real-time water, the water's BVH, each with one
-#   step per launch beside (a copy of the tree whose default is 1).
+#   step per launch beside (a copy of the tree whose default is 1); PART final: the device tests
+#   of the session's changes, then the tables of BENCHMARKS.md at the final defaults, the
+#   water's BVH beside the height field, the TLAS's five launches beside its one (a copy of the
+#   tree), the host's cost of a launch and of a frame.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -61,6 +64,34 @@ frame)
     lb bench frame $f --frame-time 0.0025 --out "$out/pool_rt" | tail -1
     lb bench frame $f $static --water-accel bvh --out "$out/static_bvh" | tail -1
     lb bench frame $f $static --no-profiling --out "$out/static_noprof" | tail -1
+    ;;
+final)
+    timeout 300 python3 -m pytest -q -p no:cacheprovider tests/lbm/test_step2.py \
+        tests/raytrace/test_heightfield.py tests/raytrace/test_tlas_one_launch.py \
+        tests/raytrace/test_render_coop.py tests/raytrace/test_render_bins.py \
+        tests/app/test_frame_pipeline.py 2>&1 | tail -3
+    variant_tree /tmp/tlas5 "s/self.tlas_one_launch = TLAS_ONE_LAUNCH/self.tlas_one_launch = 0/" \
+        raytrace/scene.py
+    for rep in 1 2; do
+        lb bench frame $f $static --out "$out/static_$rep" | tail -1
+        lb bench frame $f --out "$out/pool_$rep" | tail -1
+    done
+    for acc in grid bvh; do
+        lb bench frame $f $static --per-depth --water-accel $acc --out "$out/static_pd_$acc" \
+            | tail -1
+        lb bench frame $f --per-depth --water-accel $acc --out "$out/pool_pd_$acc" | tail -1
+        lb bench frame $k $static --water-accel $acc --out "$out/static4k_$acc" | tail -1
+        lb bench frame $f $static --frame-time 0.0025 --water-accel $acc \
+            --out "$out/static_rt_$acc" | tail -1
+    done
+    lb bench frame $k --out "$out/pool4k" | tail -1
+    lb bench frame $f --frame-time 0.0025 --out "$out/pool_rt" | tail -1
+    lb bench frame $f $static --no-profiling --out "$out/static_noprof" | tail -1
+    in_tree /tmp/tlas5 bench frame $f $static --per-depth --out "$out/static_pd_tlas5" | tail -1
+    python3 bench/launch_cost.py | tee "$out/launch_cost.json"
+    python3 bench/host_frame.py --scene bench/scenes/pool_static_boat.toml --cells 1024 \
+        --size 1920 1080 --hold-ms 0 --photons 131072 --caustic-resolution 256 \
+        | tee "$out/host_frame.json"
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
