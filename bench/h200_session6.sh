@@ -9,7 +9,9 @@
 #   step per launch beside (a copy of the tree whose default is 1); PART final: the device tests
 #   of the session's changes, then the tables of BENCHMARKS.md at the final defaults, the
 #   water's BVH beside the height field, the TLAS's five launches beside its one (a copy of the
-#   tree), the host's cost of a launch and of a frame.
+#   tree), the host's cost of a launch and of a frame; PART readq: where the time between frames
+#   goes: the image read on the main queue (no cross-queue wait) and, as a diagnosis only (the
+#   next frame may overwrite the image being read), without the render's wait for the last read.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -92,6 +94,18 @@ final)
     python3 bench/host_frame.py --scene bench/scenes/pool_static_boat.toml --cells 1024 \
         --size 1920 1080 --hold-ms 0 --photons 131072 --caustic-resolution 256 \
         | tee "$out/host_frame.json"
+    ;;
+readq)
+    variant_tree /tmp/mainq \
+        's/slot.image = rings\["image"\].enqueue_read(copy, src, wait_for=\[done\])/slot.image = rings["image"].enqueue_read(q, src)/' \
+        app/world.py
+    variant_tree /tmp/nowait "s/        if w._image_read is not None:   # the last/        if False:   # the last/" \
+        app/world.py
+    for rep in 1 2; do
+        lb bench frame $f $static --out "$out/static_$rep" | tail -1
+        in_tree /tmp/mainq bench frame $f $static --out "$out/static_mainq_$rep" | tail -1
+        in_tree /tmp/nowait bench frame $f $static --out "$out/static_nowait_$rep" | tail -1
+    done
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
