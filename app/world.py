@@ -208,6 +208,7 @@ class World:
         self._guard_prev = None
         if self.sim is not None:
             self._guard_prev = self.sim.guard_record()
+            self.sim.read_guard_each_check = False   # each frame's _Readback reads it
         self.stages = [_Inputs(self), _Water(self), _SceneUpdate(self), _Caustics(self),
                        _Render(self), _Readback(self)]
         self.rt.finish()
@@ -827,7 +828,7 @@ class _Render:
         if w._image_read is not None:   # the last image's read (copy queue) before its rewrite
             cl.enqueue_barrier(w.rt.queue, wait_for=[w._image_read])
             w._image_read = None
-        w.renderer.enqueue_frame(update_scene=False)
+        w.renderer.enqueue_frame(update_scene=False, read_stats=False)   # _Readback reads them
 
 
 class _Readback:
@@ -842,22 +843,26 @@ class _Readback:
     def enqueue(self, frame: Frame, slot: _Slot) -> None:
         w = self.world
         q, r, rings = w.rt.queue, w.renderer, w._rings
-        slot.counts = rings["counts"].enqueue_read(q, r.stats)
-        if w.sim is not None:
+        if w.sim is not None:   # on this queue: the next frame's water rewrites the record
             slot.guard = rings["guard"].enqueue_read(q, w.sim.guard_buffer)
         src = r.rgba
         if w._display is not None:   # to the window's GL on the device: no read-back
+            slot.counts = rings["counts"].enqueue_read(q, r.stats)
+            r.use_stats_handle(slot.counts)
             slot.image = w._display.enqueue(q, src)
             q.flush()
             return
         if w._yuv is not None:
             w._yuv.enqueue(src)
             src = w._yuv.yuv
-        # the image on the copy queue, after this frame's kernels: it overlaps the next frame's
-        # water and BVH stages, and the next render waits for it (_Render)
+        # the counts and the image on the copy queue, after this frame's kernels: they overlap
+        # the next frame's water and BVH stages, and the next render, which rewrites both, waits
+        # for the image's read (_Render), the last of them
         done = cl.enqueue_marker(q)
         q.flush()
         copy = w.rt.copy_queue
+        slot.counts = rings["counts"].enqueue_read(copy, r.stats, wait_for=[done])
+        r.use_stats_handle(slot.counts)
         slot.image = rings["image"].enqueue_read(copy, src, wait_for=[done])
         w._image_read = slot.image.event
         copy.flush()

@@ -11,7 +11,9 @@
 #   water's BVH beside the height field, the TLAS's five launches beside its one (a copy of the
 #   tree), the host's cost of a launch and of a frame; PART readq: where the time between frames
 #   goes: the image read on the main queue (no cross-queue wait) and, as a diagnosis only (the
-#   next frame may overwrite the image being read), without the render's wait for the last read.
+#   next frame may overwrite the image being read), without the render's wait for the last read;
+#   PART reads: one read each of the counts and the guard record per frame, the counts on the
+#   copy queue, against the four reads on the main queue before (a copy of the tree).
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -106,6 +108,18 @@ readq)
         in_tree /tmp/mainq bench frame $f $static --out "$out/static_mainq_$rep" | tail -1
         in_tree /tmp/nowait bench frame $f $static --out "$out/static_nowait_$rep" | tail -1
     done
+    ;;
+reads)
+    variant_tree /tmp/reads4 \
+        "s/self.sim.read_guard_each_check = False/self.sim.read_guard_each_check = True/; s/read_stats=False)   # _Readback reads them/read_stats=True)/; s/rings\[\"counts\"\].enqueue_read(copy, r.stats, wait_for=\[done\])/rings[\"counts\"].enqueue_read(q, r.stats)/" \
+        app/world.py
+    grep -c "read_guard_each_check = True\|read_stats=True)\|enqueue_read(q, r.stats)" /tmp/reads4/app/world.py
+    for rep in 1 2 3; do
+        lb bench frame $f $static --out "$out/static_$rep" | tail -1
+        in_tree /tmp/reads4 bench frame $f $static --out "$out/static_reads4_$rep" | tail -1
+    done
+    lb bench frame $f --out "$out/pool" | tail -1
+    in_tree /tmp/reads4 bench frame $f --out "$out/pool_reads4" | tail -1
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac

@@ -193,6 +193,10 @@ class ShallowWater:
 
         self._guard_host = np.zeros(1, GUARD_DTYPE)
         self._guard_evt: cl.Event | None = None
+        #: Read the guard record after every check (False: a caller that reads it itself, as
+        #: the World does into its pinned ring, spares the queue that copy; guard_record()
+        #: then reads on demand)
+        self.read_guard_each_check = True
         self._reported = np.zeros(1, GUARD_DTYPE)  # counters at the last stats() call
         self._rain: _Rain | None = None
         self._rain_seed = None
@@ -552,8 +556,10 @@ class ShallowWater:
                                                          256 if rt.is_gpu else None)
         if self._guard_evt is not None:  # released, it would wait for its read: kept
             rt.keep(self._guard_evt)
-        self._guard_evt = cl.enqueue_copy(rt.queue, self._guard_host, self._guard,
-                                          is_blocking=False)
+        self._guard_evt = None
+        if self.read_guard_each_check:
+            self._guard_evt = cl.enqueue_copy(rt.queue, self._guard_host, self._guard,
+                                              is_blocking=False)
         self._since_check = 0
         self._dirty = False
 
@@ -785,9 +791,13 @@ class ShallowWater:
 
     # -- the guard --------------------------------------------------------------------------
     def guard_record(self) -> np.void:
-        """The device guard record as of the last check (waits for that check only)."""
+        """The device guard record as of the last check (waits for that check only; without
+        :attr:`read_guard_each_check`, for everything enqueued)."""
         if self._dirty:
             self._check(SaveRequest.NO)
+        if self._guard_evt is None:
+            self._guard_evt = cl.enqueue_copy(self.rt.queue, self._guard_host, self._guard,
+                                              is_blocking=True)
         self._guard_evt.wait()
         return self._guard_host[0].copy()
 

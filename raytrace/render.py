@@ -625,8 +625,9 @@ class Renderer:
         return p
 
     # -- the frame ----------------------------------------------------------------------------
-    def enqueue_frame(self, *, update_scene: bool = True) -> None:
-        """Queue one frame (scene update, all chunks, tonemap). No host sync.
+    def enqueue_frame(self, *, update_scene: bool = True, read_stats: bool = True) -> None:
+        """Queue one frame (scene update, all chunks, tonemap) and, with ``read_stats``, the
+        read of its ray counts (:attr:`stats_handle`). No host sync.
 
         Every depth level up to ``bounces`` is launched whatever the last frame needed, so a
         frame's picture depends only on the scene and camera (per-ray kernels grid-stride over
@@ -663,10 +664,16 @@ class Renderer:
             ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few, bins)
         self._run(ops, rebind=len(self._plan) > 1 or ops is not self._last_ops)
         self._last_ops = ops
+        if read_stats:
+            self.use_stats_handle(self.enqueue_read_stats())
+
+    def use_stats_handle(self, handle: ReadHandle) -> None:
+        """Size the next frames' launches from the ray counts ``handle`` reads (after a frame
+        queued with ``read_stats=False``, whose caller queued that read)."""
         old = self._stats_handle
         if old is not None:  # its event waits for the read when released: kept until done
             self.rt.keep(old.event)
-        self._stats_handle = self.enqueue_read_stats()
+        self._stats_handle = handle
 
     #: Plan steps: a launch (cl kernel, global size, local size, stage), arguments to bind
     #: (Kernel, {name: value}; with one chunk only when the plan changes) and a flush.

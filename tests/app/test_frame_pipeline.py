@@ -154,6 +154,25 @@ def test_pool_frames_move_only_the_image_and_scalars(rt):
     assert world.stats.stage_ms.get("caustics.photons", 0) > 0
 
 
+def test_a_frame_reads_its_image_counts_and_guard_once(tiny, rt):
+    """A frame's device-to-host copies: the image, the ray counts and the guard record, one
+    each (the solver's own read after each check and the renderer's own count read are left to
+    the World's pinned rings)."""
+    from lbm.structs import GUARD_DTYPE
+    from raytrace.render_types import STATS_LEN
+
+    world = World(tiny, rt, frames_in_flight=2)
+    image = world.frame(1 / 60).nbytes
+    with TransferCounter() as c:
+        for _ in range(4):
+            world.enqueue_frame(1 / 60)
+            world.read_frame()
+        world.drain()
+    sizes = sorted(b for _, b in c.calls)
+    assert sizes == sorted([image, 4 * STATS_LEN, GUARD_DTYPE.itemsize] * 4), c.calls
+    assert world.sim.guard_record()["checks"] > 0    # still read on demand
+
+
 # ---- determinism -----------------------------------------------------------------------------
 def _run(scene, rt, n, *, drop_at=2):
     world = World(scene, rt)
