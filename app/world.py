@@ -89,6 +89,7 @@ class _Slot:
         self.frame: Frame | None = None
         self.t0 = 0.0
         self.image = self.counts = self.guard = None  # kernels.pinned.ReadHandle
+        self.guard_copy: cl.Buffer | None = None      # the device copy its guard read reads
 
 
 def buffer_bytes(*roots) -> int:
@@ -209,6 +210,9 @@ class World:
         if self.sim is not None:
             self._guard_prev = self.sim.guard_record()
             self.sim.read_guard_each_check = False   # each frame's _Readback reads it
+            # the record as of each frame's last check, copied by that check (two frames'
+            # copies: the next frame's steps and the copy queue's read of this one overlap)
+            self._guard_copies = [self.rt.buffer(GUARD_DTYPE.itemsize) for _ in range(2)]
         self.stages = [_Inputs(self), _Water(self), _SceneUpdate(self), _Caustics(self),
                        _Render(self), _Readback(self)]
         self.rt.finish()
@@ -469,7 +473,7 @@ class World:
         if not self._free:
             self._complete(self._in_flight.popleft(), keep_image=False)
         slot = self._free.popleft()
-        slot.frame, slot.t0 = frame, time.perf_counter()
+        slot.frame, slot.t0, slot.guard_copy = frame, time.perf_counter(), None
         for stage in stages:
             stage.enqueue(frame, slot)
         self.rt.timer.close_frame(frame.index)
@@ -781,8 +785,13 @@ class _Water:
         steps = int(math.floor(owed + 1e-9))
         w._carry = max(0.0, owed - steps)
         frame.lbm_steps = steps
+        if slot is not None:   # a rendered frame: its read-back reads this copy of the record
+            w.sim.guard_snapshot = slot.guard_copy = w._guard_copies[frame.index % 2]
         if steps:
             w.sim.step(steps)
+        else:
+            w.sim.copy_guard_to_snapshot()
+        w.sim.guard_snapshot = None   # checks outside frames leave the copies alone
         if steps or frame.drops or frame.pushes:
             w.sim.write_surface(w.water.vertices, w.water.normals, w.water.origin)
         frame.sim_time_end = w.sim.time
@@ -843,26 +852,31 @@ class _Readback:
     def enqueue(self, frame: Frame, slot: _Slot) -> None:
         w = self.world
         q, r, rings = w.rt.queue, w.renderer, w._rings
-        if w.sim is not None:   # on this queue: the next frame's water rewrites the record
-            slot.guard = rings["guard"].enqueue_read(q, w.sim.guard_buffer)
         src = r.rgba
+        if w.sim is not None and slot.guard_copy is None:   # no water stage: the live record
+            slot.guard = rings["guard"].enqueue_read(q, w.sim.guard_buffer)
         if w._display is not None:   # to the window's GL on the device: no read-back
             slot.counts = rings["counts"].enqueue_read(q, r.stats)
             r.use_stats_handle(slot.counts)
+            if slot.guard_copy is not None:
+                slot.guard = rings["guard"].enqueue_read(q, slot.guard_copy)
             slot.image = w._display.enqueue(q, src)
             q.flush()
             return
         if w._yuv is not None:
             w._yuv.enqueue(src)
             src = w._yuv.yuv
-        # the counts and the image on the copy queue, after this frame's kernels: they overlap
-        # the next frame's water and BVH stages, and the next render, which rewrites both, waits
-        # for the image's read (_Render), the last of them
+        # the counts, the guard record's copy and the image on the copy queue, after this
+        # frame's kernels: they overlap the next frame's water and BVH stages, and the next
+        # render, which rewrites the counts and the image (and precedes the next rewrite of
+        # this guard copy), waits for the image's read (_Render), the last of them
         done = cl.enqueue_marker(q)
         q.flush()
         copy = w.rt.copy_queue
         slot.counts = rings["counts"].enqueue_read(copy, r.stats, wait_for=[done])
         r.use_stats_handle(slot.counts)
+        if slot.guard_copy is not None:
+            slot.guard = rings["guard"].enqueue_read(copy, slot.guard_copy, wait_for=[done])
         slot.image = rings["image"].enqueue_read(copy, src, wait_for=[done])
         w._image_read = slot.image.event
         copy.flush()

@@ -13,7 +13,9 @@
 #   goes: the image read on the main queue (no cross-queue wait) and, as a diagnosis only (the
 #   next frame may overwrite the image being read), without the render's wait for the last read;
 #   PART reads: one read each of the counts and the guard record per frame, the counts on the
-#   copy queue, against the four reads on the main queue before (a copy of the tree).
+#   copy queue, against the four reads on the main queue before (a copy of the tree); PART
+#   guardq: the guard record's copy (made by the frame's last check) read on the copy queue
+#   against the record read on the main queue (a copy of the tree).
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -120,6 +122,15 @@ reads)
     done
     lb bench frame $f --out "$out/pool" | tail -1
     in_tree /tmp/reads4 bench frame $f --out "$out/pool_reads4" | tail -1
+    ;;
+guardq)
+    variant_tree /tmp/guardq \
+        "s/slot.guard = rings\[\"guard\"\].enqueue_read(copy, slot.guard_copy, wait_for=\[done\])/slot.guard = rings[\"guard\"].enqueue_read(q, slot.guard_copy)/" \
+        app/world.py
+    for rep in 1 2 3; do
+        lb bench frame $f $static --out "$out/static_$rep" | tail -1
+        in_tree /tmp/guardq bench frame $f $static --out "$out/static_guardq_$rep" | tail -1
+    done
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac

@@ -102,24 +102,13 @@ void lbm_reduce_partial(__global const LBM_FT* restrict f, __global const uchar*
     }
 }
 
-/* Reduce the partials into the guard record and decide: non-finite cells -> restore the
+/* The reduced partials acc into the guard record, and the decision: non-finite cells -> restore the
  * checkpoint (LBM_GUARD only; the volume it changes is booked as clipped or created so the
  * budget mass0 + sources - clipped + created = mass holds); a clean interval (no NaN, no clamp)
  * -> save a checkpoint when asked (save: LBM_SAVE_*; LBM_SAVE_FORCE saves whatever the interval
  * was). The first check after set_state (checks == 0) sets mass0. */
-__kernel __attribute__((reqd_work_group_size(LBM_REDUCE_WG, 1, 1)))
-void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
-                      __global LbmGuard* g, const int save)
+void lbm_guard_decide(__global LbmGuard* g, const LbmPartial acc, const int save)
 {
-    LBM_LOCALS;
-    LbmPartial acc = LBM_ACC_ZERO;
-    for (int k = get_local_id(0); k < n_partials; k += LBM_REDUCE_WG) {
-        lbm_acc_merge(&acc, partials[k]);
-    }
-    acc = lbm_acc_reduce_local(acc, l_mass, l_lo, l_u2, l_fr2, l_h, l_nan, l_damp);
-    if (get_local_id(0) != 0) return;
-    acc.mass += acc.mass_lo;   /* the pair's float32 value */
-
     if (g->checks == 0u) g->mass0 = acc.mass;
     g->checks += 1u;
     g->nan_cells = acc.nan_cells;
@@ -166,4 +155,23 @@ void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
     (void)clean;
 #endif
     g->action = LBM_GUARD_NONE;
+}
+
+/* The statistics of the partials and the decision (lbm_guard_decide) into the guard record g,
+ * and a copy of the record into snapshot: the record as of this check for a reader on another
+ * queue, which the next steps' counts must not reach (the World's read-back). */
+__kernel __attribute__((reqd_work_group_size(LBM_REDUCE_WG, 1, 1)))
+void lbm_reduce_final(__global const LbmPartial* partials, const int n_partials,
+                      __global LbmGuard* g, const int save, __global LbmGuard* snapshot)
+{
+    LBM_LOCALS;
+    LbmPartial acc = LBM_ACC_ZERO;
+    for (int k = get_local_id(0); k < n_partials; k += LBM_REDUCE_WG) {
+        lbm_acc_merge(&acc, partials[k]);
+    }
+    acc = lbm_acc_reduce_local(acc, l_mass, l_lo, l_u2, l_fr2, l_h, l_nan, l_damp);
+    if (get_local_id(0) != 0) return;
+    acc.mass += acc.mass_lo;   /* the pair's float32 value */
+    lbm_guard_decide(g, acc, save);
+    *snapshot = *g;
 }

@@ -6,7 +6,7 @@ and the guard record) and one kernel object per launch, looked up once. A frame 
 
     sim.step(k)          # k x lbm_step (+ rain drops), then one guard check; no host sync
     sim.write_surface(vertex_buf, normal_buf)   # two launches into the caller's buffers
-    sim.stats()          # reads the 80-byte guard record: the only host traffic of a frame
+    sim.stats()          # reads the 112-byte guard record: the only host traffic of a frame
 
 See docs/lbm.md for units, the choice of e, dt and tau, the streaming scheme and the guard.
 """
@@ -193,6 +193,10 @@ class ShallowWater:
 
         self._guard_host = np.zeros(1, GUARD_DTYPE)
         self._guard_evt: cl.Event | None = None
+        self._guard_scratch = self.rt.buffer(GUARD_DTYPE.itemsize)
+        #: Where every check also copies the guard record (None: a scratch buffer): a reader on
+        #: another queue reads that copy, which the following steps' counts do not reach
+        self.guard_snapshot: cl.Buffer | None = None
         #: Read the guard record after every check (False: a caller that reads it itself, as
         #: the World does into its pinned ring, spares the queue that copy; guard_record()
         #: then reads on demand)
@@ -543,12 +547,14 @@ class ShallowWater:
 
     def _check(self, save: SaveRequest) -> None:
         """Guard check, all on the device: reduce, decide (restore / save / nothing), apply;
-        then start a non-blocking read of the 80-byte guard record."""
+        then start a non-blocking read of the 112-byte guard record (read_guard_each_check)."""
         rt, p = self.rt, self._params
         self._k_partial.bind(f=self._f.current, mark=self._mark.current, p=p,
                              partials=self._partials).launch(self._n_partials * 256, 256)
         self._k_final.bind(partials=self._partials, n_partials=self._n_partials, g=self._guard,
-                           save=int(save)).launch(256, 256)
+                           save=int(save),
+                           snapshot=self._guard_scratch if self.guard_snapshot is None
+                           else self.guard_snapshot).launch(256, 256)
         if self.guard:
             self._k_apply.bind(f=self._f.current, h_buf=self._h.current, f_ckpt=self._f_ckpt,
                                h_ckpt=self._h_ckpt, mark=self._mark.current, p=p,
@@ -790,6 +796,12 @@ class ShallowWater:
             self.ny, self.nx) > 0
 
     # -- the guard --------------------------------------------------------------------------
+    def copy_guard_to_snapshot(self) -> None:
+        """Copy the guard record as it stands into :attr:`guard_snapshot` now (device to
+        device): for a frame that ran no check."""
+        if self.guard_snapshot is not None:
+            cl.enqueue_copy(self.rt.queue, self.guard_snapshot, self._guard)
+
     def guard_record(self) -> np.void:
         """The device guard record as of the last check (waits for that check only; without
         :attr:`read_guard_each_check`, for everything enqueued)."""

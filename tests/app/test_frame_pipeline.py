@@ -170,7 +170,18 @@ def test_a_frame_reads_its_image_counts_and_guard_once(tiny, rt):
         world.drain()
     sizes = sorted(b for _, b in c.calls)
     assert sizes == sorted([image, 4 * STATS_LEN, GUARD_DTYPE.itemsize] * 4), c.calls
-    assert world.sim.guard_record()["checks"] > 0    # still read on demand
+    # the record read is the copy each frame's last check made; a frame without steps copies
+    # the record as it stands (a drop's volume in it)
+    world.frame(0.2)
+    assert world.stats.lbm_steps > 0
+    before = world.stats.guard["volume_sources"]
+    world.add_drop(0.4, 0.6, 0.2, 0.03)
+    world.frame(0.0)
+    assert world.stats.lbm_steps == 0
+    assert world.stats.guard["volume_sources"] > before
+    live = world.sim.guard_record()    # still read on demand
+    assert live["checks"] > 0 and live["sources"] == pytest.approx(
+        world.stats.guard["volume_sources"] / world.sim.dx ** 2, rel=1e-6)
 
 
 # ---- determinism -----------------------------------------------------------------------------
