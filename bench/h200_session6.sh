@@ -15,7 +15,8 @@
 #   PART reads: one read each of the counts and the guard record per frame, the counts on the
 #   copy queue, against the four reads on the main queue before (a copy of the tree); PART
 #   guardq: the guard record's copy (made by the frame's last check) read on the copy queue
-#   against the record read on the main queue (a copy of the tree).
+#   against the record read on the main queue (a copy of the tree); PART shadows: every level's
+#   shadow rays in launches of their own (--no-overlap), per depth, beside the primary trace.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -131,6 +132,10 @@ guardq)
         lb bench frame $f $static --out "$out/static_$rep" | tail -1
         in_tree /tmp/guardq bench frame $f $static --out "$out/static_guardq_$rep" | tail -1
     done
+    ;;
+shadows)
+    lb bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_nooverlap" | tail -1
+    lb bench frame $f --per-depth --no-overlap --out "$out/pool_pd_nooverlap" | tail -1
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
