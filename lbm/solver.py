@@ -226,9 +226,9 @@ class ShallowWater:
 
     def _wants_step2(self, uneven: bool) -> bool:
         """Two steps per launch: as the option says, or by default on a GPU for the uneven bed
-        only. Measured on an H200 (BENCHMARKS.md, sixth session): at 1024x768 cells lbm_step2
-        takes 10% less time over an uneven bed and 4% more over a flat one, whose step is
-        lighter; on a CPU it is 13-29% slower (the halo's second computation)."""
+        only. On an H200 (BENCHMARKS.md, 2026-12-02, fifth and sixth sessions), at 1024x768
+        cells, lbm_step2 takes 10% less time over an uneven bed and 4% more over a flat one,
+        whose step is lighter; on a CPU it is 13-29% slower (the halo's second computation)."""
         if not self._step2_allowed:
             return False
         return self.options.steps_per_launch == 2 or (self.rt.is_gpu and uneven)
