@@ -16,7 +16,10 @@
 #   copy queue, against the four reads on the main queue before (a copy of the tree); PART
 #   guardq: the guard record's copy (made by the frame's last check) read on the copy queue
 #   against the record read on the main queue (a copy of the tree); PART shadows: every level's
-#   shadow rays in launches of their own (--no-overlap), per depth, beside the primary trace.
+#   shadow rays in launches of their own (--no-overlap), per depth, beside the primary trace;
+#   PART shadowparts: where level 1's shadow time goes, as a diagnosis only (the images are
+#   wrong): copies of the tree without the any-hit query, without the crossings, with one
+#   crossing at most.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -136,6 +139,19 @@ guardq)
 shadows)
     lb bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_nooverlap" | tail -1
     lb bench frame $f --per-depth --no-overlap --out "$out/pool_pd_nooverlap" | tail -1
+    ;;
+shadowparts)
+    variant_tree /tmp/noany "s/    if (trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))/    if (false \&\& trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))/" \
+        kernels/render_shadow.h
+    variant_tree /tmp/nocross "s/    if (!prm->transmissive_shadows) return (float3)(1.0f);/    return (float3)(1.0f);/" \
+        kernels/render_shadow.h
+    variant_tree /tmp/onecross "s/#define RENDER_MAX_SHADOW_CROSSINGS 4/#define RENDER_MAX_SHADOW_CROSSINGS 1/" \
+        kernels/render_types.h
+    g="$f $static --per-depth --no-overlap"
+    lb bench frame $g --out "$out/static" | tail -1
+    for v in noany nocross onecross; do
+        in_tree /tmp/$v bench frame $g --out "$out/static_$v" 2>&1 | tail -1
+    done
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
