@@ -14,23 +14,7 @@ set -uo pipefail
 out=${1:?OUTDIR}
 part=${2:?PART}
 mkdir -p "$out"
-lb() { python3 -m app.cli "$@"; }
-# variant_tree DIR (SED FILE)...: a copy of the sources in DIR with each FILE edited by its SED
-# (it says which files stayed as they are: the baseline's); in_tree DIR ARGS...: lbwater ARGS
-# run from that copy
-variant_tree() {
-    local w=$1; shift
-    rm -rf "$w" && mkdir -p "$w" && cp -r app kernels lbm raytrace scenes bench "$w"/
-    while [ $# -gt 1 ]; do
-        sed -i "$1" "$w/$2"
-        cmp -s "$2" "$w/$2" && echo "$w: $2 unchanged"
-        shift 2
-    done
-}
-in_tree() { local w=$1; shift; (cd "$w" && PYTHONPATH=/tmp/site:$w python3 -m app.cli "$@"); }
-f="--cells 1024 --size 1920 1080 --frames 40"
-k="--cells 1024 --size 3840 2160 --frames 20"
-static="--scene bench/scenes/pool_static_boat.toml"
+source "$(dirname "$0")/h200_lib.sh"
 case $part in
 baseline)
     python3 bench/kernel_resources.py --out "$out/resources.json" 2>&1 | grep -E "render|caustics" \

@@ -13,10 +13,7 @@ set -uo pipefail
 out=${1:?OUTDIR}
 part=${2:?PART}
 mkdir -p "$out"
-lb() { python3 -m app.cli "$@"; }
-f="--cells 1024 --size 1920 1080 --frames 40"
-k="--cells 1024 --size 3840 2160 --frames 20"
-static="--scene bench/scenes/pool_static_boat.toml"
+source "$(dirname "$0")/h200_lib.sh"
 tests="tests/raytrace/test_heightfield.py tests/raytrace/test_tlas_one_launch.py
     tests/raytrace/test_render_coop.py tests/raytrace/test_render_bins.py
     tests/app/test_frame_pipeline.py"
@@ -37,16 +34,6 @@ ab)
     done
     ;;
 blocks)   # the y-range block's size: copies of the tree with HF_BLOCK 4 and 16 against 8
-    variant_tree() {
-        local w=$1; shift
-        rm -rf "$w" && mkdir -p "$w" && cp -r app kernels lbm raytrace scenes bench "$w"/
-        while [ $# -gt 1 ]; do
-            sed -i "$1" "$w/$2"
-            cmp -s "$2" "$w/$2" && echo "$w: $2 unchanged"
-            shift 2
-        done
-    }
-    in_tree() { local w=$1; shift; (cd "$w" && PYTHONPATH=/tmp/site:$w python3 -m app.cli "$@"); }
     for b in 4 16; do
         variant_tree /tmp/hfb$b "s/#define HF_BLOCK 8 /#define HF_BLOCK $b /" kernels/heightfield.h \
             "s/^HF_BLOCK = 8$/HF_BLOCK = $b/" raytrace/heightfield.py

@@ -25,20 +25,7 @@ set -uo pipefail
 out=${1:?OUTDIR}
 part=${2:?PART}
 mkdir -p "$out"
-lb() { python3 -m app.cli "$@"; }
-f="--cells 1024 --size 1920 1080 --frames 40"
-k="--cells 1024 --size 3840 2160 --frames 20"
-static="--scene bench/scenes/pool_static_boat.toml"
-variant_tree() {   # variant_tree DIR SED FILE [SED FILE ...]: a copy of the tree with edits
-    local w=$1; shift
-    rm -rf "$w" && mkdir -p "$w" && cp -r app kernels lbm raytrace scenes bench tests "$w"/
-    while [ $# -gt 1 ]; do
-        sed -i "$1" "$w/$2"
-        cmp -s "$2" "$w/$2" && echo "$w: $2 unchanged"
-        shift 2
-    done
-}
-in_tree() { local w=$1; shift; (cd "$w" && PYTHONPATH=/tmp/site:$w python3 -m app.cli "$@"); }
+source "$(dirname "$0")/h200_lib.sh"
 one_step() { variant_tree /tmp/spl1 \
     "s/return 2 if self.rt.is_gpu and fits else 1/return 1/" lbm/solver.py; }
 case $part in

@@ -23,14 +23,7 @@ inline bool finite3(float3 v) {
 /* Start a build: root unknown, counts zero, empty centroid bounds. */
 __kernel void bvh_reset_info(__global BvhInfo* infos, int info_index, int n_prims) {
     if (get_global_id(0) != 0) return;
-    __global BvhInfo* info = infos + info_index;
-    info->n_prims = n_prims;
-    info->n_bad = 0;
-    info->n_bad_pending = 0;
-    info->depth_guard = 0;
-    info->root = -1;
-    info->cmin = (int4)(float_to_ordered(INFINITY));
-    info->cmax = (int4)(float_to_ordered(-INFINITY));
+    bvh_info_reset(infos + info_index, n_prims);
 }
 
 /* Centroid bounds of all triangles (grid-stride loop, then one reduction per work-group). */

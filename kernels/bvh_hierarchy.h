@@ -193,4 +193,46 @@ inline void bvh_small_root(int n, int node_base, int prim_base, __global BvhNode
     info->hi = (float4)(hi, 0.0f);
 }
 
+/* Start a build: root unknown, counts zero, empty centroid bounds (one work-item). */
+inline void bvh_info_reset(__global BvhInfo* info, int n_prims) {
+    info->n_prims = n_prims;
+    info->n_bad = 0;
+    info->n_bad_pending = 0;
+    info->depth_guard = 0;
+    info->root = -1;
+    info->cmin = (int4)(float_to_ordered(INFINITY));
+    info->cmax = (int4)(float_to_ordered(-INFINITY));
+}
+
+/* Morton key of box i's centroid (boxes: lo, hi pairs) in the frame of info's centroid bounds. */
+inline uint bvh_box_key(__global const float4* restrict boxes, int i,
+                        __global const BvhInfo* info, int key_bits) {
+    float3 lo, ext;
+    morton_frame(info, &lo, &ext);
+    const uint4 masks = morton_masks(ext, key_bits);
+    return morton_isotropic(0.5f * (boxes[2 * i].xyz + boxes[2 * i + 1].xyz), lo, ext, masks);
+}
+
+/* Work-item i (< n) of the hierarchy over boxes in sorted order (order[k] = box of sorted
+   position k): a leaf walk up, or with n <= leaf_size item 0 writes the one root. */
+inline void bvh_hierarchy_box_item(int i, int n, int leaf_size, __global const uint* restrict keys,
+                                   __global const uint* restrict order,
+                                   __global const float4* restrict boxes,
+                                   __global BvhNode* nodes, __global int* flags,
+                                   __global BvhInfo* info) {
+    if (n <= leaf_size) {
+        if (i != 0) return;
+        float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
+        for (int k = 0; k < n; ++k) {
+            lo = fmin(lo, boxes[2 * order[k]].xyz);
+            hi = fmax(hi, boxes[2 * order[k] + 1].xyz);
+        }
+        bvh_small_root(n, 0, 0, nodes, info, lo, hi);
+        return;
+    }
+    const uint b = order[i];
+    bvh_walk(i, n, leaf_size, 0, 0, keys, nodes, flags, info, boxes[2 * b].xyz,
+             boxes[2 * b + 1].xyz);
+}
+
 #endif

@@ -96,11 +96,7 @@ __kernel void bvh_box_morton(int n, __global const float4* restrict boxes,
                              __global uint* restrict keys, __global uint* restrict vals) {
     int i = get_global_id(0);
     if (i >= n) return;
-    float3 lo, ext;
-    morton_frame(info, &lo, &ext);
-    uint4 masks = morton_masks(ext, key_bits);
-    float3 c = 0.5f * (boxes[2 * i].xyz + boxes[2 * i + 1].xyz);
-    keys[i] = morton_isotropic(c, lo, ext, masks);
+    keys[i] = bvh_box_key(boxes, i, info, key_bits);
     vals[i] = i;
 }
 
@@ -110,20 +106,7 @@ __kernel void bvh_hierarchy_boxes(int n, int leaf_size, __global const uint* res
                                   __global const float4* restrict boxes, __global BvhNode* nodes,
                                   __global int* flags, __global BvhInfo* info) {
     int i = get_global_id(0);
-    if (i >= n) return;
-    if (n <= leaf_size) {
-        if (i != 0) return;
-        float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
-        for (int k = 0; k < n; ++k) {
-            lo = fmin(lo, boxes[2 * order[k]].xyz);
-            hi = fmax(hi, boxes[2 * order[k] + 1].xyz);
-        }
-        bvh_small_root(n, 0, 0, nodes, info, lo, hi);
-        return;
-    }
-    uint b = order[i];
-    bvh_walk(i, n, leaf_size, 0, 0, keys, nodes, flags, info, boxes[2 * b].xyz,
-             boxes[2 * b + 1].xyz);
+    if (i < n) bvh_hierarchy_box_item(i, n, leaf_size, keys, order, boxes, nodes, flags, info);
 }
 
 /* The whole TLAS of n_inst <= TLAS_ONE_LAUNCH instances in one work-group: the header reset,
@@ -144,15 +127,7 @@ void tlas_build_one_group(int n_inst, __global const Transform* restrict xforms,
     __local float lmin[3 * BOUNDS_WG], lmax[3 * BOUNDS_WG];
     __local uint lkey[TLAS_ONE_LAUNCH], lval[TLAS_ONE_LAUNCH];
     const int i = get_local_id(0), n = n_inst;
-    if (i == 0) { /* bvh_reset_info */
-        info->n_prims = n;
-        info->n_bad = 0;
-        info->n_bad_pending = 0;
-        info->depth_guard = 0;
-        info->root = -1;
-        info->cmin = (int4)(float_to_ordered(INFINITY));
-        info->cmax = (int4)(float_to_ordered(-INFINITY));
-    }
+    if (i == 0) bvh_info_reset(info, n); /* bvh_reset_info */
     barrier(CLK_GLOBAL_MEM_FENCE);
     float3 c = (float3)(INFINITY);
     if (i < n)
@@ -161,15 +136,7 @@ void tlas_build_one_group(int n_inst, __global const Transform* restrict xforms,
     reduce_centroid_bounds(c, isfinite(c.x) ? c : (float3)(-INFINITY), lmin, lmax, info);
     barrier(CLK_GLOBAL_MEM_FENCE);
     if (i < TLAS_ONE_LAUNCH) { /* bvh_box_morton; past n: keys after every real one */
-        uint key = 0xffffffffu;
-        if (i < n) {
-            float3 lo, ext;
-            morton_frame(info, &lo, &ext);
-            const uint4 masks = morton_masks(ext, 32);
-            key = morton_isotropic(0.5f * (boxes[2 * i].xyz + boxes[2 * i + 1].xyz), lo, ext,
-                                   masks);
-        }
-        lkey[i] = key;
+        lkey[i] = i < n ? bvh_box_key(boxes, i, info, 32) : 0xffffffffu;
         lval[i] = (uint)i;
     }
     for (int size = 2; size <= TLAS_ONE_LAUNCH; size <<= 1) {
@@ -195,18 +162,6 @@ void tlas_build_one_group(int n_inst, __global const Transform* restrict xforms,
         order[i] = lval[i];
     }
     barrier(CLK_GLOBAL_MEM_FENCE);
-    if (i >= n) return;
-    if (n <= TLAS_LEAF_SIZE) { /* bvh_hierarchy_boxes */
-        if (i != 0) return;
-        float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
-        for (int k = 0; k < n; ++k) {
-            lo = fmin(lo, boxes[2 * order[k]].xyz);
-            hi = fmax(hi, boxes[2 * order[k] + 1].xyz);
-        }
-        bvh_small_root(n, 0, 0, nodes, info, lo, hi);
-        return;
-    }
-    const uint b = order[i];
-    bvh_walk(i, n, TLAS_LEAF_SIZE, 0, 0, keys, nodes, flags, info, boxes[2 * b].xyz,
-             boxes[2 * b + 1].xyz);
+    if (i < n) /* bvh_hierarchy_boxes */
+        bvh_hierarchy_box_item(i, n, TLAS_LEAF_SIZE, keys, order, boxes, nodes, flags, info);
 }

@@ -215,28 +215,31 @@ int lbm_limit(float* h, float* ux, float* uy, const LbmParams p)
     return hit;
 }
 
-/* Stored population a of cell n, as float32. */
+/* LBM_FP16S: population a of the lake at rest, which the storage subtracts (0 for float32). */
 float lbm_rest(const int a, const LbmParams p)
 {
     return a == 0 ? p.rest0 : ((a & 1) ? p.rest_axis : p.rest_diag);
 }
 
+/* Population a of index n of populations stored in planes rn apart (any address space), as
+ * float32; and its store. */
+#if LBM_FP16S
+#define LBM_LOAD_AT(f, a, n, rn, p) (vload_half((a) * (rn) + (n), (f)) + lbm_rest((a), (p)))
+#define LBM_STORE_AT(f, a, n, rn, p, v) \
+    vstore_half_rte((v) - lbm_rest((a), (p)), (a) * (rn) + (n), (f))
+#else
+#define LBM_LOAD_AT(f, a, n, rn, p) ((f)[(a) * (rn) + (n)])
+#define LBM_STORE_AT(f, a, n, rn, p, v) ((f)[(a) * (rn) + (n)] = (v))
+#endif
+
 float lbm_load(__global const LBM_FT* f, const int a, const int n, const LbmParams p)
 {
-#if LBM_FP16S
-    return vload_half(a * p.n_cells + n, f) + lbm_rest(a, p);
-#else
-    return f[a * p.n_cells + n];
-#endif
+    return LBM_LOAD_AT(f, a, n, p.n_cells, p);
 }
 
 void lbm_store(__global LBM_FT* f, const int a, const int n, const LbmParams p, const float v)
 {
-#if LBM_FP16S
-    vstore_half_rte(v - lbm_rest(a, p), a * p.n_cells + n, f);
-#else
-    f[a * p.n_cells + n] = v;
-#endif
+    LBM_STORE_AT(f, a, n, p.n_cells, p, v);
 }
 
 /* *addr += v for a float in global memory (OpenCL 1.2 has no float atomics): a compare-exchange

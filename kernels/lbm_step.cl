@@ -152,14 +152,6 @@ LbmWindow lbm_window(const int ox, const int oy, const int rw, const int rn)
 /* Index of grid cell (i, j) in window w. */
 #define LBM_AT(w, i, j) (((j) - (w).oy) * (w).rw + ((i) - (w).ox))
 
-/* Population a of window index n as float32 (lbm_load for any address space and stride). */
-#if LBM_FP16S
-#define LBM_LOAD_AT(f, a, n, w, p) (vload_half((a) * (w).rn + (n), (f)) + lbm_rest((a), (p)))
-#define LBM_STORE_AT(f, a, n, w, p, v) vstore_half_rte((v) - lbm_rest((a), (p)), (a) * (w).rn + (n), (f))
-#else
-#define LBM_LOAD_AT(f, a, n, w, p) ((f)[(a) * (w).rn + (n)])
-#define LBM_STORE_AT(f, a, n, w, p, v) ((f)[(a) * (w).rn + (n)] = (v))
-#endif
 
 /* One link of lbm_stream: population a of cell (i, j) from its source cell, plus the bed force. */
 #define LBM_PULL_LINK(a, cx, cy, mx, my, opp)                                                    \
@@ -167,7 +159,7 @@ LbmWindow lbm_window(const int ox, const int oy, const int rw, const int rn)
         int si, sj, m;                                                                           \
         lbm_pull_source(p, i, j, a, cx, cy, mx, my, opp, &si, &sj, &m);                          \
         const int s = LBM_AT(w, si, sj);                                                         \
-        fa[a] = LBM_LOAD_AT(f, m, s, w, p);                                                      \
+        fa[a] = LBM_LOAD_AT(f, m, s, w.rn, p);                                                    \
         if (LBM_BED)                                                                             \
             fa[a] = lbm_bed_force(fa[a], p, (a & 1) ? LBM_W_AXIS : LBM_W_DIAG, h_here, z_here,   \
                                   hs[s], zs[s], q, (a & 1) ? pa : pd);                           \
@@ -191,7 +183,7 @@ LbmWindow lbm_window(const int ox, const int oy, const int rw, const int rn)
             pa = lbm_quantize(LBM_W_AXIS * p_rest, q);                                           \
             pd = lbm_quantize(LBM_W_DIAG * p_rest, q);                                           \
         }                                                                                        \
-        fa[0] = LBM_LOAD_AT(f, 0, n, w, p);                                                      \
+        fa[0] = LBM_LOAD_AT(f, 0, n, w.rn, p);                                                    \
         LBM_LINKS(LBM_PULL_LINK)                                                                 \
     }
 LBM_DEFINE_STREAM(lbm_stream, __global)
@@ -351,7 +343,7 @@ void lbm_step2(__global const LBM_FT* restrict f_src, __global LBM_FT* restrict 
         if (LBM_GUARD)
             m1[r] = (uchar)lbm_mark_next(clamped, own,
                                          clamped ? 0 : lbm_mark_neighbours_local(m0, w0, p, i, j));
-        for (int a = 0; a < 9; ++a) LBM_STORE_AT(lf1, a, r, w1, p, f[a]);
+        for (int a = 0; a < 9; ++a) LBM_STORE_AT(lf1, a, r, w1.rn, p, f[a]);
         if (LBM_BED) {
             h1[r] = h;
             z1[r] = z0[LBM_AT(w0, i, j)];
@@ -368,9 +360,10 @@ void lbm_step2(__global const LBM_FT* restrict f_src, __global LBM_FT* restrict 
     const int own = LBM_GUARD ? m1[LBM_AT(w1, i, j)] : 0;
     int clamped;
     const float h = lbm_relax(f, p, tau, own, guard, 1, &clamped);
-    if (LBM_GUARD)
-        mark_dst[n] = (uchar)lbm_mark_next(clamped, own,
-                                           clamped ? 0 : lbm_mark_neighbours_local(m1, w1, p, i, j));
+    if (LBM_GUARD) {
+        const int nb = clamped ? 0 : lbm_mark_neighbours_local(m1, w1, p, i, j);
+        mark_dst[n] = (uchar)lbm_mark_next(clamped, own, nb);
+    }
     for (int a = 0; a < 9; ++a) lbm_store(f_dst, a, n, p, f[a]);
     if (LBM_BED) h_dst[n] = h;
 }
