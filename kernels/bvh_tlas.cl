@@ -79,7 +79,8 @@ void tlas_prep(int n_inst, __global const Transform* restrict xforms,
                __global const int* restrict inst_mesh, __global const int* restrict mesh_prim_base,
                __global const BvhInfo* restrict blas_infos,
                __global const int* restrict mesh_wide_root, int wide,
-               __global const uint* restrict inst_mask, __global Instance* restrict instances, __global Transform* restrict normals,
+               __global const uint* restrict inst_mask, __global Instance* restrict instances,
+               __global Transform* restrict normals,
                __global float4* restrict boxes, __global BvhInfo* tlas_info) {
     __local float lmin[3 * BOUNDS_WG], lmax[3 * BOUNDS_WG];
     int i = get_global_id(0);
