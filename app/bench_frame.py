@@ -58,6 +58,10 @@ def add_arguments(p) -> None:
     p.add_argument("--cost-bins", choices=("on", "off"), default=None,
                    help="group each work-group's shadow rays by cost (RenderSettings.cost_bins: "
                         "whole warps of crossing rays); default: the device's choice (on a GPU)")
+    p.add_argument("--direct-crossings", choices=("on", "off"), default="on",
+                   help="the shadow rays' crossings of the one instance holding dielectrics "
+                        "(the water) walk it alone, or (off) go through the TLAS walk "
+                        "(RenderSettings.direct_crossings; the same image)")
     p.add_argument("--no-profiling", action="store_true",
                    help="run on a queue without profiling (no per-stage times: wall and latency "
                         "only), to see what the event timestamps cost")
@@ -157,6 +161,7 @@ def run(args) -> int:
         bins_arg = getattr(args, "cost_bins", None)
         if bins_arg is not None:
             world.renderer.set_cost_bins(bins_arg == "on")
+        world.renderer.set_direct_crossings(getattr(args, "direct_crossings", "on") == "on")
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -208,6 +213,7 @@ def run(args) -> int:
                "overlap_from": world.renderer.settings.overlap_from,
                "coop_from": world.renderer.settings.coop_from,
                "cost_bins": world.renderer.settings.cost_bins,
+               "direct_crossings": world.renderer.settings.direct_crossings,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,
                "rays_per_depth": " ".join(str(n) for n in st.rays_per_depth),

@@ -20,7 +20,10 @@ inline float smooth01(float e0, float e1, float x)
  * inside (no refraction bending: no caustics). There, first an any-hit query of the opaque-only
  * instances (RENDER_MASK_OPAQUE: it ends at the first blocker and never enters the water's
  * tree), then the crossings, closest hit by closest hit, of the instances that hold a
- * dielectric (RENDER_MASK_TRANSMISSIVE; an opaque triangle there still blocks). */
+ * dielectric (RENDER_MASK_TRANSMISSIVE; an opaque triangle there still blocks): where one
+ * instance holds them all (RenderParams.crossing_instance: the water, as a rule), its own
+ * BLAS or height-field walk alone, with no TLAS walk, which half the crossings of the water's
+ * sunlit hits spent proving the ray misses the water's box. */
 inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS,
                                    __constant const RenderParams* prm, float3 org, float3 dir,
                                    float tmax, int medium)
@@ -32,9 +35,9 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS,
     if (!prm->transmissive_shadows) return (float3)(1.0f);
     float3 T = (float3)(1.0f);
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
-        const Hit h = trace_closest_masked(TRACE_ARGS, org, dir, 0.0f, tmax,
-                                           RENDER_MASK_TRANSMISSIVE,
-                                           TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
+        const Hit h = trace_closest_only(TRACE_ARGS, org, dir, 0.0f, tmax,
+                                         RENDER_MASK_TRANSMISSIVE, prm->crossing_instance,
+                                         TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
         if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;

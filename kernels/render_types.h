@@ -123,7 +123,9 @@ typedef struct {
     float4 exposure;    /* x exposure multiplier */
     uint n_lights, fresnel, sky, cubemap_tex;
     uint transmissive_shadows, tonemap, max_depth, capacity;
-    float min_weight, pad0, pad1, pad2;
+    float min_weight;
+    int crossing_instance; /* the one instance holding the dielectrics, else -1 (render_shadow.h) */
+    float pad1, pad2;
 } RenderParams;
 
 /* 16 bytes. render_raygen's per-launch values: the chunk it starts. */

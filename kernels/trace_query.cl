@@ -22,7 +22,7 @@ __kernel void trace_any(SCENE_PARAMS, int n, __global const float4* restrict org
     if (i >= n) return;
     float4 o = org[i], d = dir[i];
     Hit h;
-    trace_scene(SCENE_ARGS, o.xyz, d.xyz, o.w, d.w, true, mask, &h, TRACE_KIND_QUERY);
+    trace_scene(SCENE_ARGS, o.xyz, d.xyz, o.w, d.w, true, mask, -1, &h, TRACE_KIND_QUERY);
     hits[i] = h;
 }
 
@@ -47,7 +47,7 @@ __kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void trac
     for (int i = get_group_id(0); i < n; i += get_num_groups(0)) {
         float4 o = org[i], d = dir[i];
         Hit h;
-        trace_scene_coop(SCENE_ARGS, &coop, o.xyz, d.xyz, o.w, d.w, true, mask, &h,
+        trace_scene_coop(SCENE_ARGS, &coop, o.xyz, d.xyz, o.w, d.w, true, mask, -1, &h,
                          TRACE_KIND_QUERY);
         if (get_local_id(0) == 0) hits[i] = h;
     }

@@ -484,11 +484,38 @@ TRACE_INLINE TraceRay trace_object_ray(__global const Instance* ins, float3 org,
     return trace_object_ray_od(ins, org, dir, &o, &d);
 }
 
+/* Instance id's BLAS, or the height field's walk when its mesh is hf_mesh, for a world ray:
+   shrinks *tmax and records the hit as trace_blas; nothing for an instance without a BLAS.
+   `work`, `inst_work`: the counters of a TRACE_COUNT build (unused otherwise). */
+TRACE_INLINE bool trace_instance(SCENE_PARAMS, int id, int hf_mesh, float3 org, float3 dir,
+                                 float tmin, float* tmax, bool any, Hit* hit, uint* work,
+                                 uint* inst_work) {
+    __global const Instance* ins = instances + id;
+    int broot = ins->blas_root;
+    if (broot < 0) return false;
+    float3 oo, od;
+    TraceRay lr = trace_object_ray_od(ins, org, dir, &oo, &od);
+    TRACE_TICK(work, TRACE_CNT_ENTRIES, 1);
+#if TRACE_COUNT
+    uint before = work[TRACE_CNT_BLAS];
+#endif
+    bool got = ins->mesh == hf_mesh
+        ? trace_heightfield(hf_info, hf_vertices, hf_blocks, &lr, oo, od, tmin, tmax, hit, id, any)
+        : trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, tmax, hit, id, any, trace_stats,
+                     work);
+#if TRACE_COUNT
+    inst_work[min(id, TRACE_COUNT_INST - 1)] += work[TRACE_CNT_BLAS] - before;
+#endif
+    return got;
+}
+
 /* The whole scene: the TLAS over instances, each instance's BLAS in its object space; only
-   instances whose visibility mask shares a bit with `mask`. `work`: the counters of a
-   TRACE_COUNT build (unused otherwise). */
+   instances whose visibility mask shares a bit with `mask`. With `only` >= 0, the caller knows
+   that instance to be the one `mask` can match: its BLAS alone, no TLAS walk (the same hit).
+   `work`: the counters of a TRACE_COUNT build (unused otherwise). */
 TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
-                                   bool any, uint mask, Hit* hit, uint* work, uint* inst_work) {
+                                   bool any, uint mask, int only, Hit* hit, uint* work,
+                                   uint* inst_work) {
     hit->t = INFINITY;
     hit->u = 0.0f;
     hit->v = 0.0f;
@@ -497,9 +524,12 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
     int root = tlas_info->root;
     if (root < 0 || !(tmax > tmin) || (dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f))
         return false;
-    TraceRay wr = trace_ray_setup(org, dir);
     const int hf_mesh = hf_info->mesh;
     float tbest = tmax;
+    if (only >= 0)
+        return trace_instance(SCENE_ARGS, only, hf_mesh, org, dir, tmin, &tbest, any, hit, work,
+                              inst_work);
+    TraceRay wr = trace_ray_setup(org, dir);
     int stack[TRACE_STACK];
     int sp = 0, node = root;
     bool found = false;
@@ -517,24 +547,9 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
             if (cnt > 0 && te < INFINITY) {
                 for (int k = first; k < first + cnt; ++k) {
                     int id = tlas_prims[k];
-                    __global const Instance* ins = instances + id;
-                    int broot = ins->blas_root;
-                    if (broot < 0 || !(ins->mask & mask)) continue;
-                    float3 oo, od;
-                    TraceRay lr = trace_object_ray_od(ins, org, dir, &oo, &od);
-                    TRACE_TICK(work, TRACE_CNT_ENTRIES, 1);
-#if TRACE_COUNT
-                    uint before = work[TRACE_CNT_BLAS];
-#endif
-                    bool got = ins->mesh == hf_mesh
-                        ? trace_heightfield(hf_info, hf_vertices, hf_blocks, &lr, oo, od, tmin,
-                                            &tbest, hit, id, any)
-                        : trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, &tbest, hit, id,
-                                     any, trace_stats, work);
-#if TRACE_COUNT
-                    inst_work[min(id, TRACE_COUNT_INST - 1)] += work[TRACE_CNT_BLAS] - before;
-#endif
-                    if (got) {
+                    if (!(instances[id].mask & mask)) continue;
+                    if (trace_instance(SCENE_ARGS, id, hf_mesh, org, dir, tmin, &tbest, any, hit,
+                                       work, inst_work)) {
                         found = true;
                         if (any) return true;
                     }
@@ -550,13 +565,13 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
 
 /* trace_scene_walk, its work added to kind's counters in a TRACE_COUNT build. */
 TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
-                              bool any, uint mask, Hit* hit, int kind) {
+                              bool any, uint mask, int only, Hit* hit, int kind) {
 #if TRACE_COUNT
     uint work[TRACE_COUNT_FIELDS], inst_work[TRACE_COUNT_INST];
     for (int f = 0; f < TRACE_COUNT_FIELDS; ++f) work[f] = 0;
     for (int f = 0; f < TRACE_COUNT_INST; ++f) inst_work[f] = 0;
     bool found =
-        trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, work, inst_work);
+        trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, only, hit, work, inst_work);
     work[TRACE_CNT_RAYS] = (kind & TRACE_CONTINUE) ? 0u : 1u;
     work[TRACE_CNT_TRAVERSALS] = 1u;
     work[TRACE_CNT_HITS] = found ? 1u : 0u;
@@ -569,7 +584,7 @@ TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, 
         if (inst_work[f]) atomic_add(ci + f, inst_work[f]);
     return found;
 #else
-    return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, 0, 0);
+    return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, only, hit, 0, 0);
 #endif
 }
 
@@ -579,7 +594,7 @@ TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, 
 TRACE_INLINE Hit scene_closest_hit_masked(SCENE_PARAMS, float3 org, float3 dir, float tmin,
                                           float tmax, uint mask, int kind) {
     Hit h;
-    trace_scene(SCENE_ARGS, org, dir, tmin, tmax, false, mask, &h, kind);
+    trace_scene(SCENE_ARGS, org, dir, tmin, tmax, false, mask, -1, &h, kind);
     return h;
 }
 
@@ -587,7 +602,7 @@ TRACE_INLINE Hit scene_closest_hit_masked(SCENE_PARAMS, float3 org, float3 dir, 
 TRACE_INLINE bool scene_any_hit_masked(SCENE_PARAMS, float3 org, float3 dir, float tmin,
                                        float tmax, uint mask, int kind) {
     Hit h;
-    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, mask, &h, kind);
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, mask, -1, &h, kind);
 }
 
 /* The same over every instance. */
@@ -602,7 +617,7 @@ TRACE_INLINE bool scene_any_hit(SCENE_PARAMS, float3 org, float3 dir, float tmin
 /* Any hit, and which one was found first (not necessarily the closest). */
 TRACE_INLINE bool scene_any_hit_record(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
                                        Hit* h) {
-    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, ~0u, h, TRACE_KIND_QUERY);
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, true, ~0u, -1, h, TRACE_KIND_QUERY);
 }
 
 #endif

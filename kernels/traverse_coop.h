@@ -247,7 +247,7 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
     if (flags & TRACE_COOP_FULL) { /* stack full: the serial walk, the same in every lane */
         if (lid == 0) atomic_inc(trace_stats + TRACE_STAT_COOP_REDO);
         barrier(CLK_LOCAL_MEM_FENCE); /* the scratch may be reused at once */
-        return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, 0, 0);
+        return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, -1, hit, 0, 0);
     }
     /* the smallest (t, inst, prim) over the lanes, found by every lane alike */
     coop->rt[lid] = pt;
@@ -276,37 +276,48 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
 
 #if TRACE_COOP
 /* The hit of trace_scene, found by the whole work-group (see above) or, without the
-   cooperative walk in this build, by each work-item alone. */
+   cooperative walk in this build or for one instance alone (`only` >= 0, trace_scene_walk), by
+   each work-item alike. */
 TRACE_INLINE bool trace_scene_coop(SCENE_PARAMS, __local TraceCoop* coop, float3 org,
                                    float3 dir, float tmin, float tmax, bool any, uint mask,
-                                   Hit* hit, int kind) {
+                                   int only, Hit* hit, int kind) {
 #if TRACE_COOP_WALK
-    return trace_scene_coop_walk(SCENE_ARGS, coop, org, dir, tmin, tmax, any, mask, hit);
-#elif TRACE_COUNT
-    if (get_local_id(0) == 0) /* count the ray once */
-        return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, kind);
-    uint work[TRACE_COUNT_FIELDS], inst_work[TRACE_COUNT_INST];
-    for (int f = 0; f < TRACE_COUNT_FIELDS; ++f) work[f] = 0;
-    for (int f = 0; f < TRACE_COUNT_INST; ++f) inst_work[f] = 0;
-    return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, work, inst_work);
-#else
-    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, any, mask, hit, kind);
+    if (only < 0)
+        return trace_scene_coop_walk(SCENE_ARGS, coop, org, dir, tmin, tmax, any, mask, hit);
 #endif
+#if TRACE_COUNT
+    if (get_local_id(0) != 0) { /* count the ray once */
+        uint work[TRACE_COUNT_FIELDS], inst_work[TRACE_COUNT_INST];
+        for (int f = 0; f < TRACE_COUNT_FIELDS; ++f) work[f] = 0;
+        for (int f = 0; f < TRACE_COUNT_INST; ++f) inst_work[f] = 0;
+        return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, only, hit, work,
+                                inst_work);
+    }
+#endif
+    return trace_scene(SCENE_ARGS, org, dir, tmin, tmax, any, mask, only, hit, kind);
 }
 #endif
 
 /* scene_closest_hit_masked / scene_any_hit_masked for the per-ray bodies (TRACE_PARAMS):
-   per work-item, or per work-group when coop_on in a TRACE_COOP build. */
-TRACE_INLINE Hit trace_closest_masked(TRACE_PARAMS, float3 org, float3 dir, float tmin,
-                                      float tmax, uint mask, int kind) {
+   per work-item, or per work-group when coop_on in a TRACE_COOP build. trace_closest_only:
+   with `only` >= 0, the caller knows that instance to be the one `mask` can match
+   (trace_scene_walk): its BLAS alone, per work-item. */
+TRACE_INLINE Hit trace_closest_only(TRACE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
+                                    uint mask, int only, int kind) {
+    Hit h;
 #if TRACE_COOP
     if (coop_on) {
-        Hit h;
-        trace_scene_coop(SCENE_ARGS, coop, org, dir, tmin, tmax, false, mask, &h, kind);
+        trace_scene_coop(SCENE_ARGS, coop, org, dir, tmin, tmax, false, mask, only, &h, kind);
         return h;
     }
 #endif
-    return scene_closest_hit_masked(SCENE_ARGS, org, dir, tmin, tmax, mask, kind);
+    trace_scene(SCENE_ARGS, org, dir, tmin, tmax, false, mask, only, &h, kind);
+    return h;
+}
+
+TRACE_INLINE Hit trace_closest_masked(TRACE_PARAMS, float3 org, float3 dir, float tmin,
+                                      float tmax, uint mask, int kind) {
+    return trace_closest_only(TRACE_ARGS, org, dir, tmin, tmax, mask, -1, kind);
 }
 
 TRACE_INLINE bool trace_any_masked(TRACE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
@@ -314,7 +325,7 @@ TRACE_INLINE bool trace_any_masked(TRACE_PARAMS, float3 org, float3 dir, float t
 #if TRACE_COOP
     if (coop_on) {
         Hit h;
-        return trace_scene_coop(SCENE_ARGS, coop, org, dir, tmin, tmax, true, mask, &h, kind);
+        return trace_scene_coop(SCENE_ARGS, coop, org, dir, tmin, tmax, true, mask, -1, &h, kind);
     }
 #endif
     return scene_any_hit_masked(SCENE_ARGS, org, dir, tmin, tmax, mask, kind);

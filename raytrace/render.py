@@ -140,6 +140,9 @@ class RenderSettings:
                                   #: work-group's rays to its work-items grouped by cost
                                   #: (kernels/render_bins.h: whole warps of shadow rays that
                                   #: cross the water); the same image
+    direct_crossings: bool = True  #: a shadow ray's crossings of the scene's one instance
+                                   #: holding dielectrics (the water) walk it alone, with no
+                                   #: TLAS walk (RenderScene.crossing_instance); the same image
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -420,6 +423,12 @@ class Renderer:
         self.settings = new
         self._bound_sig = None  # rebind: the binned kernels
 
+    def set_direct_crossings(self, on: bool) -> None:
+        """Walk the one dielectric instance alone for the shadow rays' crossings
+        (``direct_crossings``) from the next frame on; an A/B switch (bench frame
+        --direct-crossings on|off). The same image either way."""
+        self.settings = dataclasses.replace(self.settings, direct_crossings=bool(on))
+
     def set_stage_per_depth(self, on: bool = True) -> None:
         """Time each depth level's trace, shade, shadow, scan and gather under its own stage
         (``render.shadow.d3``), e.g. to see the tail levels of few rays (bench frame
@@ -617,6 +626,7 @@ class Renderer:
         p["sky"] = int(sky.kind)
         p["cubemap_tex"] = max(sky.cubemap, 0) if sky.kind == SkyKind.CUBEMAP else 0
         p["transmissive_shadows"] = int(sc.has_dielectric)
+        p["crossing_instance"] = sc.crossing_instance if s.direct_crossings else -1
         p["tonemap"] = int(Tonemap.from_str(s.tonemap))
         p["max_depth"] = s.bounces
         p["capacity"] = self.capacity
@@ -819,8 +829,9 @@ class Renderer:
     def _upload_inputs(self) -> None:
         """Copy the camera and the RenderParams record to the device when they changed."""
         cam = self.camera.tobytes()
-        sc = self.scene
-        key = (sc.sky, tuple(sc.ambient), len(sc.lights), len(sc.materials))
+        sc, s = self.scene, self.settings
+        key = (sc.sky, tuple(sc.ambient), len(sc.lights), len(sc.materials),
+               sc.crossing_instance, s.direct_crossings)
         if key != self._params_key:
             self._params_key, self._params_rec = key, np.array([self.params()])
         prm = self._params_rec.tobytes()

@@ -126,6 +126,9 @@ class RenderScene:
         self.ambient = (0.05, 0.05, 0.05)
         self.meshes: list[dict] = []
         self.instances = np.zeros(0, INSTANCEINFO)
+        #: the one instance whose materials include a dielectric, else -1 (none, or several):
+        #: a shadow ray's crossings are its own walk alone (render_shadow.h); set by update()
+        self.crossing_instance = -1
         self._layout_meshes = -1
         self._dirty = {"materials", "textures", "lights", "instances"}
         self.dyn_positions = rt.buffer(16)  # the dynamic meshes' own arrays (MESH_DYNAMIC)
@@ -471,10 +474,15 @@ class RenderScene:
 
     def _set_masks(self) -> None:
         """Each instance's visibility bit: MASK_OPAQUE when every material it can show is
-        opaque, else MASK_TRANSMISSIVE (render_shade.cl's shadow rays trace them apart)."""
+        opaque, else MASK_TRANSMISSIVE (render_shade.cl's shadow rays trace them apart); and
+        :attr:`crossing_instance`."""
+        holding = []
         for i in range(len(self.instances)):
             diel = any(self.materials[k].ior > 0 for k in self.instance_materials(i))
             self.scene.set_instance_mask(i, MASK_TRANSMISSIVE if diel else MASK_OPAQUE)
+            if diel:
+                holding.append(i)
+        self.crossing_instance = holding[0] if len(holding) == 1 else -1
 
     def update(self, rebuild: bool = False) -> None:
         """Bring BVHs and shading tables up to date (enqueued; no host sync)."""

@@ -79,3 +79,67 @@ def test_faint_light_needs_no_shadow_ray(rt_count):
     assert cut["shadow_rays"] < 0.7 * full["shadow_rays"]
     diff = np.abs(cut["framebuffer"] - full["framebuffer"]).max(axis=2)
     assert 0 < diff.max() <= 2 * min_weight
+
+
+def crossing_counts(sc, r):
+    return r.read_framebuffer(), sc.scene.trace_counts()["crossing"]
+
+
+def test_crossings_walk_the_one_dielectric_instance_alone(rt_count):
+    """The pond's water is its one instance holding a dielectric: with direct_crossings (the
+    default) the shadow rays' crossings walk its BLAS with no TLAS node visited, the same rays
+    and hits as through the TLAS, and the same image bytes."""
+    s = RenderSettings(width=27, height=19, bounces=2)
+    sc, r = render(rt_count, s)
+    assert sc.crossing_instance == 1 and r.params()["crossing_instance"] == 1
+    direct, cd = crossing_counts(sc, r)
+    sc, r = render(rt_count, dataclasses.replace(s, direct_crossings=False))
+    assert r.params()["crossing_instance"] == -1
+    walked, ct = crossing_counts(sc, r)
+    assert cd["tlas_nodes"] == 0 < ct["tlas_nodes"]
+    assert cd["rays"] == ct["rays"] > 0 and cd["hits"] == ct["hits"] > 0
+    # the walk alone visits the BLAS's root for the rays the TLAS would have culled at its box
+    assert cd["blas_nodes"] >= ct["blas_nodes"]
+    np.testing.assert_array_equal(direct, walked)
+
+
+def test_crossing_instance_is_the_only_one(rt):
+    """-1 where no instance, or more than one, holds a dielectric: the TLAS walk finds them."""
+    sc = pond(rt)
+    glass = sc.add_material(Material(diffuse=(0, 0, 0), ior=1.5))
+    sc.update()
+    assert sc.crossing_instance == 1
+    V, F = box((0.5, 0.5, 0.5), (0.8, 0.8, 0.8))
+    sc.add_instance(sc.add_mesh(V, F, material=glass))
+    sc.update()
+    assert sc.crossing_instance == -1
+    dry = RenderScene(rt)
+    V, F = quad((0, 0, 0), 1)
+    dry.add_instance(dry.add_mesh(V, F, material=dry.add_material(Material())))
+    dry.update()
+    assert dry.crossing_instance == -1
+
+
+def test_crossings_walk_the_height_field_alone(rt_count):
+    """The pool's water, traced as a height field, is its one instance holding a dielectric:
+    the crossings walk its cells with no TLAS node visited, and the frame is the same bytes as
+    through the TLAS."""
+    from pathlib import Path
+
+    from app.world import World
+
+    scene = Path(__file__).resolve().parents[2] / "bench" / "scenes" / "pool_static_boat.toml"
+    frames = []
+    for direct in (True, False):
+        world = World(scene, rt_count, width=40, height=24, cells=64, water_steps=2)
+        assert world.water_accel == "grid"
+        world.renderer.set_direct_crossings(direct)
+        sc = world.render_scene
+        sc.scene.reset_trace_counts()
+        img = world.frame(0.0).copy()
+        assert world.instances[sc.crossing_instance] == "water"
+        frames.append((img, sc.scene.trace_counts()["crossing"]))
+    (direct, cd), (walked, ct) = frames
+    assert cd["tlas_nodes"] == 0 < ct["tlas_nodes"]
+    assert cd["rays"] == ct["rays"] > 0 and cd["hits"] == ct["hits"] > 0
+    np.testing.assert_array_equal(direct, walked)

@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-02 (seventh session)" rows: the
+# shadow rays' crossings of the scene's one dielectric instance (the water) walked alone
+# (RenderSettings.direct_crossings) against through the TLAS walk. Usage:
+#   bench/h200_session7.sh OUTDIR PART
+# PART crossings: the device tests of the change, then issue 9's baseline scene per depth with
+#   every level's shadow rays in launches of their own (--no-overlap), the default frame at
+#   1080p and 4K, and the pool at 1080p, each with --direct-crossings on and off in turns.
+# The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+set -uo pipefail
+out=${1:?OUTDIR}
+part=${2:?PART}
+mkdir -p "$out"
+source "$(dirname "$0")/h200_lib.sh"
+case $part in
+crossings)
+    timeout 300 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_render_shadow.py \
+        tests/raytrace/test_heightfield.py tests/raytrace/test_render_coop.py \
+        tests/raytrace/test_render_bins.py 2>&1 | tail -3
+    for rep in 1 2; do
+        for dc in on off; do
+            lb bench frame $f $static --per-depth --no-overlap --direct-crossings $dc \
+                --out "$out/static_pd_${dc}_$rep" | tail -1
+            lb bench frame $f $static --direct-crossings $dc --out "$out/static_${dc}_$rep" \
+                | tail -1
+            lb bench frame $f --direct-crossings $dc --out "$out/pool_${dc}_$rep" | tail -1
+        done
+    done
+    for dc in on off; do
+        lb bench frame $k $static --direct-crossings $dc --out "$out/static4k_$dc" | tail -1
+    done
+    ;;
+*) echo "unknown part $part"; exit 2 ;;
+esac
+exit 0
