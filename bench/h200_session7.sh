@@ -5,7 +5,10 @@
 #   bench/h200_session7.sh OUTDIR PART
 # PART crossings: the device tests of the change, then issue 9's baseline scene per depth with
 #   every level's shadow rays in launches of their own (--no-overlap), the default frame at
-#   1080p and 4K, and the pool at 1080p, each with --direct-crossings on and off in turns.
+#   1080p and 4K, and the pool at 1080p, each with --direct-crossings on and off in turns;
+#   PART shadowbase: where the shadow stage's time goes, as a diagnosis only (the images are
+#   wrong): copies of the tree without the any-hit query, without the crossings, without both,
+#   and with each shadow ray returning after its hit is read.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -28,6 +31,23 @@ crossings)
     done
     for dc in on off; do
         lb bench frame $k $static --direct-crossings $dc --out "$out/static4k_$dc" | tail -1
+    done
+    ;;
+shadowbase)
+    # a diagnosis only (the images are wrong): copies of the tree without the any-hit query,
+    # without the crossings, without both (the shading and light loop alone), and returning
+    # after each hit's read (the launches and the reads alone)
+    noany="s/    if (trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))/    if (false \&\& trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))/"
+    nocross="s/    if (!prm->transmissive_shadows) return (float3)(1.0f);/    return (float3)(1.0f);/"
+    bare="s/    if (h.prim < 0 || prm->n_lights == 0) return;/    if (h.prim < 0 || prm->n_lights == 0 || h.prim >= 0) return;/"
+    variant_tree /tmp/noany "$noany" kernels/render_shadow.h
+    variant_tree /tmp/nocross "$nocross" kernels/render_shadow.h
+    variant_tree /tmp/notrace "$noany" kernels/render_shadow.h "$nocross" kernels/render_shadow.h
+    variant_tree /tmp/bare "$bare" kernels/render_shadow.h
+    g="$f $static --per-depth --no-overlap"
+    lb bench frame $g --out "$out/static" | tail -1
+    for v in noany nocross notrace bare; do
+        in_tree /tmp/$v bench frame $g --out "$out/static_$v" 2>&1 | tail -1
     done
     ;;
 *) echo "unknown part $part"; exit 2 ;;
