@@ -8,7 +8,10 @@
 #   1080p and 4K, and the pool at 1080p, each with --direct-crossings on and off in turns;
 #   PART shadowbase: where the shadow stage's time goes, as a diagnosis only (the images are
 #   wrong): copies of the tree without the any-hit query, without the crossings, without both,
-#   and with each shadow ray returning after its hit is read.
+#   and with each shadow ray returning after its hit is read; PART deck: the pool's floor,
+#   walls and deck as one mesh (bench/patches/pool_one_mesh.patch) against the deck as an
+#   instance of its own, per depth and whole frames, in turns; PART deckcount: the two trees'
+#   traversal counters on the device (bench/trace_visits.py).
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -48,6 +51,42 @@ shadowbase)
     lb bench frame $g --out "$out/static" | tail -1
     for v in noany nocross notrace bare; do
         in_tree /tmp/$v bench frame $g --out "$out/static_$v" 2>&1 | tail -1
+    done
+    ;;
+deck)
+    # the pool's floor, walls and deck as one mesh (bench/patches/pool_one_mesh.patch applied
+    # to a copy of the tree) against the deck as an instance of its own (the tree), in turns
+    variant_tree /tmp/deck1
+    (cd /tmp/deck1 && patch -p1 -s < "$OLDPWD/bench/patches/pool_one_mesh.patch")
+    (cd /tmp/deck1 && timeout 200 python3 -m pytest -q -p no:cacheprovider \
+        tests/app/test_scene_render.py tests/raytrace/test_render_shadow.py 2>&1 | tail -1)
+    g="$f $static --per-depth --no-overlap"
+    for rep in 1 2; do
+        in_tree /tmp/deck1 bench frame $g --out "$out/static_pd_onemesh_$rep" | tail -1
+        lb bench frame $g --out "$out/static_pd_$rep" | tail -1
+        in_tree /tmp/deck1 bench frame $f $static --out "$out/static_onemesh_$rep" | tail -1
+        lb bench frame $f $static --out "$out/static_$rep" | tail -1
+        in_tree /tmp/deck1 bench frame $f --out "$out/pool_onemesh_$rep" | tail -1
+        lb bench frame $f --out "$out/pool_$rep" | tail -1
+    done
+    in_tree /tmp/deck1 bench frame $k $static --out "$out/static4k_onemesh" | tail -1
+    lb bench frame $k $static --out "$out/static4k" | tail -1
+    in_tree /tmp/deck1 bench frame $k --out "$out/pool4k_onemesh" | tail -1
+    lb bench frame $k --out "$out/pool4k" | tail -1
+    ;;
+deckcount)
+    # the traversal counters (a TRACE_COUNT build) of the two trees of PART deck on the device,
+    # at the frame benchmark's sizes
+    variant_tree /tmp/deck1
+    (cd /tmp/deck1 && patch -p1 -s < "$OLDPWD/bench/patches/pool_one_mesh.patch")
+    tv="--cells 1024 --size 1920 1080 --settle 0.3 --caustics off"
+    for t in . /tmp/deck1; do
+        n=$([ "$t" = . ] && echo twomesh || echo onemesh)
+        (cd $t && PYTHONPATH=/tmp/site:$PWD python3 bench/trace_visits.py $tv --scene \
+            bench/scenes/pool_static_boat.toml --boat floating --json "$out/tv_static_$n.json" \
+            | tail -4)
+        (cd $t && PYTHONPATH=/tmp/site:$PWD python3 bench/trace_visits.py $tv --boat floating \
+            --json "$out/tv_pool_$n.json" | tail -4)
     done
     ;;
 *) echo "unknown part $part"; exit 2 ;;
