@@ -10,8 +10,7 @@
 #   wrong): copies of the tree without the any-hit query, without the crossings, without both,
 #   and with each shadow ray returning after its hit is read; PART deck: the pool's floor,
 #   walls and deck as one mesh (bench/patches/pool_one_mesh.patch) against the deck as an
-#   instance of its own, per depth and whole frames, in turns; PART deckcount: the two trees'
-#   traversal counters on the device (bench/trace_visits.py).
+#   instance of its own, per depth and whole frames, in turns.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -73,21 +72,6 @@ deck)
     lb bench frame $k $static --out "$out/static4k" | tail -1
     in_tree /tmp/deck1 bench frame $k --out "$out/pool4k_onemesh" | tail -1
     lb bench frame $k --out "$out/pool4k" | tail -1
-    ;;
-deckcount)
-    # the traversal counters (a TRACE_COUNT build) of the two trees of PART deck on the device,
-    # at the frame benchmark's sizes
-    variant_tree /tmp/deck1
-    (cd /tmp/deck1 && patch -p1 -s < "$OLDPWD/bench/patches/pool_one_mesh.patch")
-    tv="--cells 1024 --size 1920 1080 --settle 0.3 --caustics off"
-    for t in . /tmp/deck1; do
-        n=$([ "$t" = . ] && echo twomesh || echo onemesh)
-        (cd $t && PYTHONPATH=/tmp/site:$PWD python3 bench/trace_visits.py $tv --scene \
-            bench/scenes/pool_static_boat.toml --boat floating --json "$out/tv_static_$n.json" \
-            | tail -4)
-        (cd $t && PYTHONPATH=/tmp/site:$PWD python3 bench/trace_visits.py $tv --boat floating \
-            --json "$out/tv_pool_$n.json" | tail -4)
-    done
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
