@@ -10,7 +10,8 @@
 #   wrong): copies of the tree without the any-hit query, without the crossings, without both,
 #   and with each shadow ray returning after its hit is read; PART deck: the pool's floor,
 #   walls and deck as one mesh (bench/patches/pool_one_mesh.patch) against the deck as an
-#   instance of its own, per depth and whole frames, in turns.
+#   instance of its own, per depth and whole frames, in turns; PART layout: the wide BLAS layout
+#   against the binary one (LBWATER_BVH_LAYOUT), per depth and whole frames.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -72,6 +73,16 @@ deck)
     lb bench frame $k $static --out "$out/static4k" | tail -1
     in_tree /tmp/deck1 bench frame $k --out "$out/pool4k_onemesh" | tail -1
     lb bench frame $k --out "$out/pool4k" | tail -1
+    ;;
+layout)
+    # the wide BLAS layout (8-wide nodes, 4-triangle blocks: the CPU's) against the binary one
+    # (the GPU's), now that the water is a height field and the BLAS hold only static meshes
+    g="$f $static --per-depth --no-overlap"
+    for lay in binary wide; do
+        LBWATER_BVH_LAYOUT=$lay lb bench frame $g --out "$out/static_pd_$lay" | tail -1
+        LBWATER_BVH_LAYOUT=$lay lb bench frame $f $static --out "$out/static_$lay" | tail -1
+        LBWATER_BVH_LAYOUT=$lay lb bench frame $f --out "$out/pool_$lay" | tail -1
+    done
     ;;
 *) echo "unknown part $part"; exit 2 ;;
 esac
