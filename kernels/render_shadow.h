@@ -58,6 +58,73 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS,
     return (float3)(0.0f);
 }
 
+/* What the shadow rays of one hit share: its surface, the weight its direct light adds to the
+ * pixel with (the ray's attenuated weight times the material's direct fraction), the view
+ * direction, the facing normals, the shadow rays' origin and medium, and whether the caustic map
+ * carries its lights (a pool surface seen through the water: caustics.cl). */
+typedef struct {
+    Surface s;
+    float4 specular;   /* the material's specular rgb, w: shininess */
+    float3 w, d, nf_g, nf_s, org;
+    int medium;
+    bool caustic;
+} ShadowSite;
+
+/* Hit i's ShadowSite in *o; false when it adds no direct light (a miss, no lights, no weight). */
+inline bool shadow_site(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                        __global const Ray* restrict rays, __global const Hit* restrict hits,
+                        uint i, const CausticParams* cp, ShadowSite* o)
+{
+    const Hit h = hits[i];
+    if (h.prim < 0 || prm->n_lights == 0) return false;
+    const Ray r = rays[i];
+    o->s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
+    const Material m = g_mat[o->s.material];
+    o->w = attenuated_weight(&r, h.t, g_mat) * direct_fraction(&m);
+    if (max3(o->w) <= 0.0f) return false;
+    o->specular = m.specular;
+    o->d = ray_dir(&r);
+    facing_normals(&o->s, o->d, &o->nf_g, &o->nf_s);
+    o->org = offset_ray(o->s.p, o->nf_g);
+    o->medium = r.medium;
+    o->caustic = cp->enabled && h.inst == cp->pool_instance && r.medium >= 0;
+    return true;
+}
+
+/* Light li at site o unshadowed: the direction to it and its distance (INFINITY: directional),
+ * its irradiance E and the Phong BRDF times the cosine; false when it adds nothing (behind the
+ * surface, outside a spot's cone). */
+inline bool light_term(const ShadowSite* o, const Light li, float3* ldir, float* dist, float3* E,
+                       float3* brdf)
+{
+    if (li.kind == LIGHT_SPOT) {
+        const float3 to = li.position.xyz - o->s.p;
+        *dist = length(to);
+        *ldir = to / *dist;
+        *E = li.color.xyz * (smooth01(li.cos_outer, li.cos_inner, dot(-*ldir, li.direction.xyz))
+                             / (*dist * *dist));
+    } else {
+        *ldir = -li.direction.xyz;
+        *dist = INFINITY;
+        *E = li.color.xyz;
+    }
+    const float ndl = dot(o->nf_s, *ldir);
+    if (ndl <= 0.0f || dot(o->nf_g, *ldir) <= 0.0f || max3(*E) <= 0.0f) return false;
+    const float rv = fmax(dot(reflect_dir(-*ldir, o->nf_s), -o->d), 0.0f);
+    const float spec = o->specular.w > 0.0f ? pow(rv, o->specular.w) : 1.0f;
+    *brdf = o->s.kd * ndl + o->specular.xyz * spec;
+    return true;
+}
+
+/* Whether light that adds E brdf at site o goes unshadowed, with no shadow ray: it adds less than
+ * min_weight to the pixel (the cut-off of children), e.g. the water's sharp highlight away from
+ * the sun's mirror direction, a third of the pool's shadow rays. Unoccluded, the same sum. */
+inline bool light_below_cut(__constant const RenderParams* prm, const ShadowSite* o, float3 E,
+                            float3 brdf)
+{
+    return max3(o->w * E * brdf) < prm->min_weight;
+}
+
 /* With coop_on, the whole work-group runs it for ray i alike; one work-item adds the light. */
 inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
                        __global const Light* restrict lights, __global const Ray* restrict rays,
@@ -65,55 +132,25 @@ inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, __constant const Render
                        __global float4* restrict radiance,
                        __global const float4* restrict caustic_map, const CausticParams* cp)
 {
-    const Hit h = hits[i];
-    if (h.prim < 0 || prm->n_lights == 0) return;
-    const Ray r = rays[i];
-    const Surface s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
-    const Material m = g_mat[s.material];
-    const float3 w = attenuated_weight(&r, h.t, g_mat) * direct_fraction(&m);
-    if (max3(w) <= 0.0f) return;
-    const float3 d = ray_dir(&r);
-    float3 nf_g, nf_s;
-    facing_normals(&s, d, &nf_g, &nf_s);
-    const float3 org = offset_ray(s.p, nf_g);
+    ShadowSite o;
+    if (!shadow_site(RENDER_GEOM_ARGS, prm, rays, hits, i, cp, &o)) return;
     float3 sum = (float3)(0.0f);
-    /* a pool surface seen through the water: the caustic map carries its lights (caustics.cl) */
-    const bool caustic = cp->enabled && h.inst == cp->pool_instance && r.medium >= 0;
-    if (caustic) sum = caustic_lookup(caustic_map, cp, s.p, nf_g) * s.kd;
+    if (o.caustic) sum = caustic_lookup(caustic_map, cp, o.s.p, o.nf_g) * o.s.kd;
     for (uint l = 0; l < prm->n_lights; l++) {
-        if (caustic && ((cp->light_mask >> l) & 1u)) continue;
-        const Light li = lights[l];
-        float3 ldir, E;
+        if (o.caustic && ((cp->light_mask >> l) & 1u)) continue;
+        float3 ldir, E, brdf;
         float dist;
-        if (li.kind == LIGHT_SPOT) {
-            const float3 to = li.position.xyz - s.p;
-            dist = length(to);
-            ldir = to / dist;
-            E = li.color.xyz * (smooth01(li.cos_outer, li.cos_inner, dot(-ldir, li.direction.xyz))
-                                / (dist * dist));
-        } else {
-            ldir = -li.direction.xyz;
-            dist = INFINITY;
-            E = li.color.xyz;
-        }
-        const float ndl = dot(nf_s, ldir);
-        if (ndl <= 0.0f || dot(nf_g, ldir) <= 0.0f || max3(E) <= 0.0f) continue;
-        const float rv = fmax(dot(reflect_dir(-ldir, nf_s), -d), 0.0f);
-        const float spec = m.specular.w > 0.0f ? pow(rv, m.specular.w) : 1.0f;
-        const float3 brdf = s.kd * ndl + m.specular.xyz * spec;
-        /* light that adds less than min_weight to the pixel (the cut-off of children) is added
-         * unshadowed, with no shadow ray: e.g. the water's sharp highlight away from the sun's
-         * mirror direction, a third of the pool's shadow rays. Unoccluded, the same sum. */
-        if (max3(w * E * brdf) < prm->min_weight) {
+        if (!light_term(&o, lights[l], &ldir, &dist, &E, &brdf)) continue;
+        if (light_below_cut(prm, &o, E, brdf)) {
             sum += E * brdf;
             continue;
         }
-        const float3 T = shadow_transmittance(TRACE_ARGS, RENDER_GEOM_ARGS, prm, org, ldir, dist,
-                                              r.medium);
+        const float3 T = shadow_transmittance(TRACE_ARGS, RENDER_GEOM_ARGS, prm, o.org, ldir, dist,
+                                              o.medium);
         if (max3(T) <= 0.0f) continue;
         sum += T * E * brdf;
     }
-    if (TRACE_LEADER) radiance[i] += (float4)(w * sum, 0.0f);
+    if (TRACE_LEADER) radiance[i] += (float4)(o.w * sum, 0.0f);
 }
 
 #if TRACE_COOP

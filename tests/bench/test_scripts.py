@@ -86,3 +86,19 @@ def test_host_frame_reports_the_hosts_ms_per_frame(capsys, rt):
     assert 0 < out["enqueue_py_ms"] <= out["enqueue_ms"] and out["read_ms"] > 0
     assert out["enqueue_cl_calls"] >= out["events_per_frame"]
     assert out["pipelined_wall_ms"] > 0 and 0 <= out["held_waits"] <= 3
+
+
+def test_shadow_lean_probe(tmp_path, capsys, rt):
+    out = tmp_path / "lean.json"
+    rc = _script("shadow_lean_probe").main(
+        ["--size", "48", "32", "--cells", "32", "--settle", "1", "--repeats", "1",
+         "--json", str(out)])
+    assert rc == 0
+    res = json.loads(out.read_text())
+    assert [lv["depth"] for lv in res["levels"]] == [0, 1]
+    for lv in res["levels"]:
+        assert lv["shadow_ms"] > 0 and lv["lean_ms"] > 0
+        assert lv["emit_plus_lean_ms"] == lv["emit_ms"] + lv["lean_ms"]
+        assert lv["max_abs_diff"] <= 1e-4 * lv["radiance_max"]
+    assert res["levels"][0]["primary_trace_ms"] > 0
+    assert "level 1:" in capsys.readouterr().out

@@ -1,0 +1,205 @@
+"""What a shadow stage that traced a list of rays written by the shading would cost: a diagnosis
+of issue 9's last speed goal (shadow rays no costlier than the primary trace), not a render path.
+
+After a frame of two levels (``bounces = 1``: level 0's and level 1's rays and hits stay in the
+renderer's buffers), each level's shadow rays run as the renderer runs them (``render_shadow``,
+and ``render_shadow_binned`` where the renderer bins a level) and as the two launches of
+kernels/render_shadow_lean_probe.cl: ``render_shadow_emit`` (render_shadow's shading and light
+loop, writing each traced shadow ray to a list, crossing rays first) and ``render_shadow_lean``
+(the list alone, traced with the same shadow_transmittance); level 0's primary trace runs beside
+them for the ratio. Both ways must give the same radiance (checked each run); the medians of the
+OpenCL event times go to ``--json``.
+
+    PYTHONPATH=$PWD python bench/shadow_lean_probe.py --scene bench/scenes/pool_static_boat.toml \\
+        --cells 1024 --size 1920 1080 --repeats 20 --json lean.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+
+def event_ms(evt) -> float:
+    return (evt.profile.end - evt.profile.start) * 1e-6
+
+
+def _read(rt, buf, dtype, n):
+    import pyopencl as cl
+
+    out = np.empty(n, dtype)
+    cl.enqueue_copy(rt.queue, out, buf)
+    return out
+
+
+class LeanShadowProbe:
+    """The two probe kernels bound to one level of ``world``'s renderer."""
+
+    def __init__(self, world, depth: int):
+        import pyopencl as cl
+
+        from raytrace.render_types import RAY
+
+        r, rt = world.renderer, world.rt
+        if len(r.scene.lights) != 1:
+            raise ValueError(f"the probe takes a scene of one light, got {len(r.scene.lights)}")
+        self.world, self.rt, self.depth = world, rt, depth
+        ks = r._depth_kernels(depth)
+        self.shadow = ks["shadow"]
+        self.shadow_binned = ks.get("shadow_binned")
+        self.trace = ks["trace"] if depth == 0 else None
+        self.n = int(_read(rt, r.counts, np.uint32, depth + 1)[depth])
+        self.radiance = r.radiance[depth % 2]
+        self.size = self.radiance.size
+        self.saved = cl.Buffer(rt.context, cl.mem_flags.READ_WRITE, self.size)
+        cl.enqueue_copy(rt.queue, self.saved, self.radiance)
+        self.capacity = max(self.n, 1)
+        self.list = cl.Buffer(rt.context, cl.mem_flags.READ_WRITE,
+                              self.capacity * RAY.itemsize)
+        self.list_counts = cl.Buffer(rt.context, cl.mem_flags.READ_WRITE, 8)
+        self.local = r.settings.local_size
+        scene = r.scene.scene.trace_bindings()
+        geom = r.scene.shade_bindings()
+        common = {**geom, "prm": r.params_buf}
+        self.emit = rt.kernel_launcher("render_shadow_lean_probe.cl", "render_shadow_emit",
+                                       stage="probe.emit")
+        self.emit.bind(**common, lights=r.scene.light_buf, rays=r.rays[depth % 2],
+                       hits=r.hits[depth % 2], counts=r.counts, depth=depth,
+                       radiance=self.radiance, caustic_map=r.caustic_map,
+                       cprm=r.caustic_params, list=self.list, list_counts=self.list_counts,
+                       capacity=self.capacity)
+        self.lean = rt.kernel_launcher("render_shadow_lean_probe.cl", "render_shadow_lean",
+                                       stage="probe.lean")
+        self.lean.bind(**scene, **common, list=self.list, list_counts=self.list_counts,
+                       capacity=self.capacity, radiance=self.radiance)
+
+    def _size(self, n: int, local: int) -> tuple:
+        return (-(-max(n, 1) // local) * local,)
+
+    def restore(self) -> None:
+        import pyopencl as cl
+
+        cl.enqueue_copy(self.rt.queue, self.radiance, self.saved)
+
+    def run_production(self, binned: bool = False):
+        from raytrace.render import BIN_WG
+
+        if binned:
+            return self.shadow_binned.launch(self._size(self.n, BIN_WG), (BIN_WG,))
+        return self.shadow.launch(self._size(self.n, self.local), (self.local,))
+
+    def run_lean(self) -> tuple:
+        """(emit event, lean event, crossing rays, other rays)."""
+        import pyopencl as cl
+
+        q = self.rt.queue
+        cl.enqueue_fill_buffer(q, self.list_counts, np.uint32(0), 0, 8)
+        e1 = self.emit.launch(self._size(self.n, self.local), (self.local,))
+        counts = _read(self.rt, self.list_counts, np.uint32, 2)
+        e2 = self.lean.launch(self._size(int(counts.sum()), self.local), (self.local,))
+        return e1, e2, int(counts[0]), int(counts[1])
+
+    def radiance_now(self) -> np.ndarray:
+        self.rt.queue.finish()
+        return _read(self.rt, self.radiance, np.float32, self.size // 4).reshape(-1, 4)
+
+
+def compare(probe: LeanShadowProbe) -> dict:
+    """The production kernel's radiance against the two launches' (from the same start)."""
+    probe.restore()
+    probe.run_production()
+    want = probe.radiance_now()[: probe.n]
+    probe.restore()
+    *_, n_cross, n_other = probe.run_lean()
+    got = probe.radiance_now()[: probe.n]
+    probe.restore()
+    scale = max(float(np.abs(want).max()), 1e-30)
+    return {"max_abs_diff": float(np.abs(got - want).max()), "radiance_max": scale,
+            "list_crossing": n_cross, "list_other": n_other}
+
+
+def time_level(probe: LeanShadowProbe, repeats: int) -> dict:
+    """Median ms of each launch over ``repeats`` rounds (one warm-up round first)."""
+    times: dict[str, list] = {}
+    for rep in range(repeats + 1):
+        evts = {"shadow": probe.run_production()}
+        if probe.shadow_binned is not None:
+            evts["shadow_binned"] = probe.run_production(binned=True)
+        evts["emit"], evts["lean"], *_ = probe.run_lean()
+        if probe.trace is not None:
+            evts["primary_trace"] = probe.trace.launch(probe._size(probe.n, probe.local),
+                                                       (probe.local,))
+        probe.rt.queue.finish()
+        if rep:
+            for k, e in evts.items():
+                times.setdefault(k, []).append(event_ms(e))
+    probe.restore()
+    out = {f"{k}_ms": float(np.median(v)) for k, v in times.items()}
+    out["emit_plus_lean_ms"] = out["emit_ms"] + out["lean_ms"]
+    return out
+
+
+def kernel_registers(rt) -> dict:
+    """Registers and spills of the probe's and the shadow stage's kernels from the compiler's
+    report (NVIDIA, with LBWATER_CL_OPTIONS=-cl-nv-verbose); empty elsewhere."""
+    import pyopencl as cl
+
+    from bench.kernel_resources import parse_log
+
+    out = {}
+    for source in ("render_shadow_lean_probe.cl", "render_shade.cl", "render_trace.cl"):
+        log = rt.program(source).get_build_info(rt.device, cl.program_build_info.LOG)
+        out.update(parse_log(log or ""))
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--scene", default=str(ROOT / "bench" / "scenes" / "pool_static_boat.toml"))
+    p.add_argument("--cells", type=int, default=256, help="water cells along the longer side")
+    p.add_argument("--size", type=int, nargs=2, default=[320, 180], metavar=("W", "H"))
+    p.add_argument("--settle", type=int, default=30, help="frames of 1/60 s before measuring")
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--device", help="OpenCL device (default: lbwater's choice)")
+    p.add_argument("--json", help="write the numbers here")
+    args = p.parse_args(argv)
+
+    from app.world import World
+
+    world = World(args.scene, args.device, width=args.size[0], height=args.size[1],
+                  cells=args.cells, bounces=1)
+    for _ in range(args.settle):
+        world.frame(1 / 60)
+    world.frame(0.0)
+    world.rt.queue.finish()
+    result = {"device": world.rt.name, "date": datetime.date.today().isoformat(),
+              "scene": args.scene, "size": args.size, "cells": args.cells,
+              "settle_frames": args.settle, "repeats": args.repeats, "levels": []}
+    for depth in (0, 1):
+        probe = LeanShadowProbe(world, depth)
+        level = {"depth": depth, "hits": probe.n, **compare(probe),
+                 **time_level(probe, args.repeats)}
+        if level["max_abs_diff"] > 1e-4 * level["radiance_max"]:
+            raise RuntimeError(f"level {depth}: the two launches' radiance differs from "
+                               f"render_shadow's by {level['max_abs_diff']:.3g}")
+        result["levels"].append(level)
+        print(f"level {depth}: {probe.n} hits, list {level['list_crossing']} crossing + "
+              f"{level['list_other']} other; " + ", ".join(
+                  f"{k[:-3]} {v:.4f}" for k, v in level.items() if k.endswith("_ms")) + " ms",
+              flush=True)
+    result["registers"] = kernel_registers(world.rt)
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,91 @@
+/* A diagnosis, not a render stage (bench/shadow_lean_probe.py; tests/raytrace/
+ * test_shadow_lean_probe.py): one level's shadow rays as two launches instead of render_shadow's
+ * one, to measure what a shadow stage that traces a list of rays the shading wrote would cost.
+ *
+ * render_shadow_emit runs render_shadow's per-hit work (shadow_site, light_term, the cut-off;
+ * render_shadow.h) and adds the light that needs no shadow ray to radiance[i]; where
+ * render_shadow would trace, it appends the shadow ray to a list instead, as a Ray record:
+ * origin, the hit's index i as ``pixel``, direction, medium, the weight w E brdf, and tmax's bits
+ * as ``sample``. Rays that start inside a dielectric (they cross its surface: the pool's floor
+ * under the water) fill the list from the front, the others from the back (list_counts[0] and
+ * [1]), so whole warps take alike rays. render_shadow_lean traces the list alone: the same
+ * shadow_transmittance, then radiance[i] += T w E brdf. With one light per scene the two give
+ * render_shadow's radiance up to rounding (w E brdf T summed in another order); with several, two
+ * entries of one hit could add to radiance[i] at once, so the probe takes one light. */
+#include "common.h"
+#include "render_shadow.h"
+
+__kernel void render_shadow_emit(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                                 __global const Light* restrict lights,
+                                 __global const Ray* restrict rays,
+                                 __global const Hit* restrict hits, __global const uint* counts,
+                                 const uint depth, __global float4* restrict radiance,
+                                 __global const float4* restrict caustic_map,
+                                 const CausticParams cprm, __global Ray* restrict list,
+                                 __global uint* restrict list_counts, const uint capacity)
+{
+    /* a work-group's entries of one light take consecutive slots: one global atomic per list
+       and work-group (a scan's cost), not one per ray */
+    __local uint group_count[2], group_base[2];
+    const uint n = counts[depth], lid = get_local_id(0);
+    for (uint base = get_group_id(0) * get_local_size(0); base < n;
+         base += get_num_groups(0) * get_local_size(0)) {   /* uniform over the work-group */
+        const uint i = base + lid;
+        ShadowSite o;
+        const bool site = i < n && shadow_site(RENDER_GEOM_ARGS, prm, rays, hits, i, &cprm, &o);
+        float3 sum = (float3)(0.0f);
+        if (site && o.caustic) sum = caustic_lookup(caustic_map, &cprm, o.s.p, o.nf_g) * o.s.kd;
+        for (uint l = 0; l < prm->n_lights; l++) {   /* uniform */
+            if (lid < 2) group_count[lid] = 0;
+            barrier(CLK_LOCAL_MEM_FENCE);
+            float3 ldir, E, brdf;
+            float dist;
+            bool traced = false;
+            if (site && !(o.caustic && ((cprm.light_mask >> l) & 1u))
+                && light_term(&o, lights[l], &ldir, &dist, &E, &brdf)) {
+                if (light_below_cut(prm, &o, E, brdf)) sum += E * brdf;
+                else traced = true;
+            }
+            const bool crossing = site && o.medium >= 0;
+            const uint k = traced ? atomic_inc(&group_count[crossing ? 0 : 1]) : 0u;
+            barrier(CLK_LOCAL_MEM_FENCE);
+            if (lid < 2) group_base[lid] = atomic_add(&list_counts[lid], group_count[lid]);
+            barrier(CLK_LOCAL_MEM_FENCE);
+            if (traced) {
+                const uint slot = group_base[crossing ? 0 : 1] + k;
+                const float3 c = o.w * E * brdf;
+                Ray s;
+                s.ox = o.org.x;
+                s.oy = o.org.y;
+                s.oz = o.org.z;
+                s.pixel = i;
+                s.dx = ldir.x;
+                s.dy = ldir.y;
+                s.dz = ldir.z;
+                s.medium = o.medium;
+                s.wr = c.x;
+                s.wg = c.y;
+                s.wb = c.z;
+                s.sample = as_uint(dist);
+                list[crossing ? slot : capacity - 1u - slot] = s;
+            }
+        }
+        if (site) radiance[i] += (float4)(o.w * sum, 0.0f);
+    }
+}
+
+__kernel void render_shadow_lean(SCENE_PARAMS, RENDER_GEOM_PARAMS,
+                                 __constant const RenderParams* prm,
+                                 __global const Ray* restrict list,
+                                 __global const uint* restrict list_counts, const uint capacity,
+                                 __global float4* restrict radiance)
+{
+    const uint front = list_counts[0], n = front + list_counts[1];
+    for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
+        const Ray s = list[j < front ? j : capacity - 1u - (j - front)];
+        const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm,
+                                              ray_org(&s), ray_dir(&s), as_float(s.sample),
+                                              s.medium);
+        if (max3(T) > 0.0f) radiance[s.pixel] += (float4)(T * ray_weight(&s), 0.0f);
+    }
+}
