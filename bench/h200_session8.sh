@@ -7,7 +7,9 @@
 # PART lean: the device tests of the probe and the shadow rays, then the probe on issue 9's
 #   baseline scene at 1920x1080 and 3840x2160 and on the pool at 1920x1080; then the baseline
 #   scene per depth (--no-overlap) and whole frames, the split against the old body (the
-#   patch reversed in a copy of the tree), in turns.
+#   patch reversed in a copy of the tree), in turns;
+# PART hfblock: the height field's y-range blocks of 4 and 16 cells a side (HF_BLOCK, copies of
+#   the tree) against 8, on the pool and the baseline scene, whole frames in turns and per depth.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -33,6 +35,26 @@ lean)
         in_tree /tmp/old bench frame $g --out "$out/static_pd_old_$rep" | tail -1
         lb bench frame $f $static --out "$out/static_$rep" | tail -1
         in_tree /tmp/old bench frame $f $static --out "$out/static_old_$rep" | tail -1
+    done
+    ;;
+hfblock)
+    for b in 4 16; do
+        variant_tree /tmp/hf$b "s/#define HF_BLOCK 8 /#define HF_BLOCK $b /" kernels/heightfield.h \
+            "s/^HF_BLOCK = 8$/HF_BLOCK = $b/" raytrace/heightfield.py
+    done
+    (cd /tmp/hf4 && PYTHONPATH=/tmp/site:/tmp/hf4 timeout 120 python3 -m pytest -q \
+        -p no:cacheprovider tests/raytrace/test_heightfield.py 2>&1 | tail -1)
+    hf() { local b=$1; shift; if [ "$b" = 8 ]; then lb "$@"; else in_tree /tmp/hf$b "$@"; fi; }
+    for rep in 1 2; do
+        for b in 8 4 16; do
+            hf $b bench frame $f --out "$out/pool_hf${b}_$rep" | tail -1
+            hf $b bench frame $f $static --out "$out/static_hf${b}_$rep" | tail -1
+        done
+    done
+    for b in 8 4 16; do
+        hf $b bench frame $f --per-depth --no-overlap --out "$out/pool_pd_hf$b" | tail -1
+        hf $b bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_hf$b" \
+            | tail -1
     done
     ;;
 *)
