@@ -46,11 +46,13 @@ class LeanShadowProbe:
     def __init__(self, world, depth: int):
         import pyopencl as cl
 
+        from kernels.errors import InputError
         from raytrace.render_types import RAY
 
         r, rt = world.renderer, world.rt
         if len(r.scene.lights) != 1:
-            raise ValueError(f"the probe takes a scene of one light, got {len(r.scene.lights)}")
+            raise InputError(f"{world.scene.path}: the probe takes a scene of one light, it has "
+                             f"{len(r.scene.lights)}")
         self.world, self.rt, self.depth = world, rt, depth
         ks = r._depth_kernels(depth)
         self.shadow = ks["shadow"]
@@ -172,6 +174,17 @@ def main(argv=None) -> int:
     p.add_argument("--json", help="write the numbers here")
     args = p.parse_args(argv)
 
+    from kernels.errors import InputError
+
+    try:
+        return measure(args)
+    except InputError as exc:   # a user's mistake: one line, no traceback
+        print(f"shadow_lean_probe: {exc}", file=sys.stderr)
+        return 2
+
+
+def measure(args) -> int:
+    """Render, probe levels 0 and 1, print a line each and write the JSON."""
     from app.world import World
 
     world = World(args.scene, args.device, width=args.size[0], height=args.size[1],

@@ -102,3 +102,20 @@ def test_shadow_lean_probe(tmp_path, capsys, rt):
         assert lv["max_abs_diff"] <= 1e-4 * lv["radiance_max"]
     assert res["levels"][0]["primary_trace_ms"] > 0
     assert "level 1:" in capsys.readouterr().out
+
+
+def test_shadow_lean_probe_one_light(tmp_path, capsys, rt):
+    """A scene of two lights: one line naming the file and the count, exit 2, no JSON."""
+    root = BENCH.parent
+    text = (BENCH / "scenes" / "pool_static_boat.toml").read_text().replace(
+        'floor_texture = "../../scenes/textures/', f'floor_texture = "{root}/scenes/textures/')
+    text += '\n[[lights]]\nkind = "directional"\ndirection = [0.0, -1.0, 0.0]\n'
+    scene = tmp_path / "two_lights.toml"
+    scene.write_text(text)
+    out = tmp_path / "lean.json"
+    rc = _script("shadow_lean_probe").main(
+        ["--scene", str(scene), "--size", "32", "24", "--cells", "32", "--settle", "0",
+         "--json", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and not out.exists()
+    assert err == [f"shadow_lean_probe: {scene}: the probe takes a scene of one light, it has 2"]
