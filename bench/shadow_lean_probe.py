@@ -32,14 +32,6 @@ def event_ms(evt) -> float:
     return (evt.profile.end - evt.profile.start) * 1e-6
 
 
-def _read(rt, buf, dtype, n):
-    import pyopencl as cl
-
-    out = np.empty(n, dtype)
-    cl.enqueue_copy(rt.queue, out, buf)
-    return out
-
-
 class LeanShadowProbe:
     """The two probe kernels bound to one level of ``world``'s renderer."""
 
@@ -53,20 +45,19 @@ class LeanShadowProbe:
         if len(r.scene.lights) != 1:
             raise InputError(f"{world.scene.path}: the probe takes a scene of one light, it has "
                              f"{len(r.scene.lights)}")
-        self.world, self.rt, self.depth = world, rt, depth
+        self.rt = rt
         ks = r._depth_kernels(depth)
         self.shadow = ks["shadow"]
         self.shadow_binned = ks.get("shadow_binned")
         self.trace = ks["trace"] if depth == 0 else None
-        self.n = int(_read(rt, r.counts, np.uint32, depth + 1)[depth])
+        self.n = int(rt.to_host(r.counts, np.uint32, 1, first=depth)[0])
         self.radiance = r.radiance[depth % 2]
         self.size = self.radiance.size
-        self.saved = cl.Buffer(rt.context, cl.mem_flags.READ_WRITE, self.size)
+        self.saved = rt.buffer(self.size)
         cl.enqueue_copy(rt.queue, self.saved, self.radiance)
         self.capacity = max(self.n, 1)
-        self.list = cl.Buffer(rt.context, cl.mem_flags.READ_WRITE,
-                              self.capacity * RAY.itemsize)
-        self.list_counts = cl.Buffer(rt.context, cl.mem_flags.READ_WRITE, 8)
+        self.list = rt.buffer(self.capacity * RAY.itemsize)
+        self.list_counts = rt.buffer(8)
         self.local = r.settings.local_size
         scene = r.scene.scene.trace_bindings()
         geom = r.scene.shade_bindings()
@@ -105,13 +96,12 @@ class LeanShadowProbe:
         q = self.rt.queue
         cl.enqueue_fill_buffer(q, self.list_counts, np.uint32(0), 0, 8)
         e1 = self.emit.launch(self._size(self.n, self.local), (self.local,))
-        counts = _read(self.rt, self.list_counts, np.uint32, 2)
+        counts = self.rt.to_host(self.list_counts, np.uint32, 2)
         e2 = self.lean.launch(self._size(int(counts.sum()), self.local), (self.local,))
         return e1, e2, int(counts[0]), int(counts[1])
 
     def radiance_now(self) -> np.ndarray:
-        self.rt.queue.finish()
-        return _read(self.rt, self.radiance, np.float32, self.size // 4).reshape(-1, 4)
+        return self.rt.to_host(self.radiance, np.float32, self.size // 4).reshape(-1, 4)
 
 
 def compare(probe: LeanShadowProbe) -> dict:

@@ -6,7 +6,6 @@ list that holds exactly the rays render_shadow traces, crossing rays in front.""
 from pathlib import Path
 
 import numpy as np
-import pyopencl as cl
 import pytest
 
 from app.world import World
@@ -51,8 +50,7 @@ def test_list_holds_the_traced_rays(rt):
     rt.queue.finish()
     probe.restore()
     assert n_cross > 0
-    lst = np.empty(probe.capacity, RAY)
-    cl.enqueue_copy(rt.queue, lst, probe.list)
+    lst = rt.to_host(probe.list, RAY, probe.capacity)
     front = lst[:n_cross]
     d = np.stack([front["dx"], front["dy"], front["dz"]], axis=1)
     assert np.allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-5)
