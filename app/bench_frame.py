@@ -62,6 +62,10 @@ def add_arguments(p) -> None:
                    help="the shadow rays' crossings of the one instance holding dielectrics "
                         "(the water) walk it alone, or (off) go through the TLAS walk "
                         "(RenderSettings.direct_crossings; the same image)")
+    p.add_argument("--light-buffer", type=int, default=None, metavar="CELLS",
+                   help="cells along each directional light's map of what blocks it "
+                        "(RenderSettings.light_buffer: the shadow rays' any-hit query without a "
+                        "BVH walk, the same image); 0: none; default: the device's choice")
     p.add_argument("--no-profiling", action="store_true",
                    help="run on a queue without profiling (no per-stage times: wall and latency "
                         "only), to see what the event timestamps cost")
@@ -152,7 +156,8 @@ def run(args) -> int:
         world = World(scene, rt, width=args.size[0], height=args.size[1], cells=cells,
                       rebuild_water_bvh=args.rebuild, caustics=args.caustics,
                       water_accel=getattr(args, "water_accel", None),
-                      frames_in_flight=getattr(args, "frames_in_flight", 2))
+                      frames_in_flight=getattr(args, "frames_in_flight", 2),
+                      light_buffer=getattr(args, "light_buffer", None))
         if getattr(args, "per_depth", False):
             world.renderer.set_stage_per_depth(True)
         world.renderer.set_overlap(not getattr(args, "no_overlap", False), overlap_from)
@@ -214,6 +219,7 @@ def run(args) -> int:
                "coop_from": world.renderer.settings.coop_from,
                "cost_bins": world.renderer.settings.cost_bins,
                "direct_crossings": world.renderer.settings.direct_crossings,
+               "light_buffer": world.renderer.settings.light_buffer,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,
                "rays_per_depth": " ".join(str(n) for n in st.rays_per_depth),

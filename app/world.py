@@ -132,6 +132,9 @@ class World:
     caustics`` (True/False: traced/off). ``image``: what :meth:`read_frame` returns, ``"rgba"``
     (height, width, 4) or ``"yuv420p"`` (the flat Y, U, V planes a video encoder takes,
     converted on the device: 1.5 bytes a pixel cross to the host instead of 4).
+    ``light_buffer``: cells along each directional light's map of what blocks it
+    (raytrace.light_buffer; the same image, faster shadow rays); None: the device's choice,
+    0: none.
     """
 
     IMAGES = ("rgba", "yuv420p")
@@ -139,11 +142,16 @@ class World:
     def __init__(self, scene, device=None, *, width=None, height=None, spp=None, bounces=None,
                  aov=False, water_steps=None, cells=None, rebuild_water_bvh=False,
                  water_accel=None, seed=None, frames_in_flight: int = 2, caustics=None,
-                 image: str = "rgba"):
+                 image: str = "rgba", light_buffer: int | None = None):
         from app.assemble import assemble, caustic_settings, check_water_accel, render_settings
         from app.scene import Scene, load_scene
         from kernels import get_runtime
-        from raytrace.render import Renderer, device_coop_from, device_cost_bins
+        from raytrace.render import (
+            Renderer,
+            device_coop_from,
+            device_cost_bins,
+            device_light_buffer,
+        )
         from raytrace.render_types import STATS_LEN
 
         if isinstance(scene, str | Path):
@@ -160,6 +168,12 @@ class World:
                              "BVH")
         if not 1 <= int(frames_in_flight) <= 8:
             raise InputError(f"frames_in_flight {frames_in_flight} out of range; allowed [1, 8]")
+        from raytrace.light_buffer import MAX_CELLS
+
+        if light_buffer is not None and not (isinstance(light_buffer, int)
+                                             and 0 <= light_buffer <= MAX_CELLS):
+            raise InputError(f"light_buffer {light_buffer!r} out of range; allowed None or "
+                             f"an integer in [0, {MAX_CELLS}]")
         self.scene = scene
         self.rt = get_runtime(device)
         a = assemble(scene, self.rt, cells=cells, water_steps=water_steps,
@@ -171,7 +185,8 @@ class World:
         self.rebuild_water_bvh = bool(rebuild_water_bvh)
         self.renderer = Renderer(self.rt, self.render_scene, render_settings(
             scene, width=width, height=height, spp=spp, bounces=bounces, aov=aov, seed=seed,
-            coop_from=device_coop_from(self.rt), cost_bins=device_cost_bins(self.rt)))
+            coop_from=device_coop_from(self.rt), cost_bins=device_cost_bins(self.rt),
+            light_buffer=device_light_buffer(self.rt) if light_buffer is None else light_buffer))
         self._caustic_box = a.caustic_box
         self._caustics = None           # raytrace.caustics.Caustics, made when first turned on
         self.set_caustics(caustic_settings(scene).mode if caustics is None else caustics)

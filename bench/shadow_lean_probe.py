@@ -71,8 +71,9 @@ class LeanShadowProbe:
                        capacity=self.capacity)
         self.lean = rt.kernel_launcher("render_shadow_lean_probe.cl", "render_shadow_lean",
                                        stage="probe.lean")
-        self.lean.bind(**scene, **common, list=self.list, list_counts=self.list_counts,
-                       capacity=self.capacity, radiance=self.radiance)
+        self.lean.bind(**scene, **common, **r.light_buffer.bindings(), list=self.list,
+                       list_counts=self.list_counts, capacity=self.capacity,
+                       radiance=self.radiance)
 
     def _size(self, n: int, local: int) -> tuple:
         return (-(-max(n, 1) // local) * local,)

@@ -27,12 +27,13 @@ __kernel void render_shadow(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const R
                             __global const Ray* restrict rays, __global const Hit* restrict hits,
                             __global const uint* counts, const uint depth,
                             __global float4* restrict radiance,
-                            __global const float4* restrict caustic_map, const CausticParams cprm)
+                            __global const float4* restrict caustic_map, const CausticParams cprm,
+                            LIGHT_BUFFER_PARAMS)
 {
     const uint n = counts[depth];
     for (uint i = get_global_id(0); i < n; i += get_global_size(0))
-        shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, i, radiance,
-                   caustic_map, &cprm);
+        shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays,
+                   hits, i, radiance, caustic_map, &cprm);
 }
 
 /* The same, each round's entries taken by the work-items in the order of their cost class
@@ -42,7 +43,7 @@ __kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void render_
     __global const Light* restrict lights, __global const Ray* restrict rays,
     __global const Hit* restrict hits, __global const uint* counts, const uint depth,
     __global float4* restrict radiance, __global const float4* restrict caustic_map,
-    const CausticParams cprm)
+    const CausticParams cprm, LIGHT_BUFFER_PARAMS)
 {
     __local RenderBins bins;
     const uint n = counts[depth];
@@ -52,8 +53,8 @@ __kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void render_
         const uint cls = j < n ? shadow_cost_class(prm, rays, hits, j, &cprm) : RENDER_BIN_IDLE;
         const uint i = bin_round(&bins, j, cls);
         if (i < n)
-            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, i,
-                       radiance, caustic_map, &cprm);
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays,
+                       hits, i, radiance, caustic_map, &cprm);
     }
 }
 
@@ -63,10 +64,10 @@ __kernel __attribute__((reqd_work_group_size(TRACE_COOP_WIDTH, 1, 1))) void rend
     __global const Light* restrict lights, __global const Ray* restrict rays,
     __global const Hit* restrict hits, __global const uint* counts, const uint depth,
     __global float4* restrict radiance, __global const float4* restrict caustic_map,
-    const CausticParams cprm)
+    const CausticParams cprm, LIGHT_BUFFER_PARAMS)
 {
     __local TraceCoop coop;
-    shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, rays, hits, counts[depth], true,
-                     radiance, caustic_map, &cprm, &coop);
+    shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays, hits,
+                     counts[depth], true, radiance, caustic_map, &cprm, &coop);
 }
 #endif

@@ -7,6 +7,7 @@
 #include "caustics.h"
 #include "render_surface.h"
 #include "traverse_coop.h"
+#include "light_buffer.h"
 
 inline float smooth01(float e0, float e1, float x)
 {
@@ -14,7 +15,8 @@ inline float smooth01(float e0, float e1, float x)
     return t * t * (3.0f - 2.0f * t);
 }
 
-/* Fraction of light reaching org along dir within tmax. Opaque scenes: one any-hit query.
+/* Fraction of light `light` reaching org along dir within tmax. Opaque scenes: one any-hit
+ * query, answered from the light's map where it has one (light_buffer.h: the same answer).
  * With dielectrics (transmissive_shadows), the ray goes straight through up to
  * RENDER_MAX_SHADOW_CROSSINGS dielectric surfaces, times (1 - Fresnel) at each and Beer-Lambert
  * inside (no refraction bending: no caustics). There, first an any-hit query of the opaque-only
@@ -24,13 +26,16 @@ inline float smooth01(float e0, float e1, float x)
  * instance holds them all (RenderParams.crossing_instance: the water, as a rule), its own
  * BLAS or height-field walk alone, with no TLAS walk, which half the crossings of the water's
  * sunlit hits spent proving the ray misses the water's box. */
-inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS,
-                                   __constant const RenderParams* prm, float3 org, float3 dir,
-                                   float tmax, int medium)
+inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
+                                   __constant const RenderParams* prm, uint light, float3 org,
+                                   float3 dir, float tmax, int medium)
 {
     /* one any-hit call site for both cases (one traversal less inlined) */
     const uint opaque = prm->transmissive_shadows ? RENDER_MASK_OPAQUE : ~0u;
-    if (trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW))
+    const int mapped = light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, org, dir, tmax);
+    if (mapped == LB_BLOCKED
+        || (mapped == LB_UNKNOWN
+            && trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW)))
         return (float3)(0.0f);
     if (!prm->transmissive_shadows) return (float3)(1.0f);
     float3 T = (float3)(1.0f);
@@ -126,7 +131,8 @@ inline bool light_below_cut(__constant const RenderParams* prm, const ShadowSite
 }
 
 /* With coop_on, the whole work-group runs it for ray i alike; one work-item adds the light. */
-inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
+                       __constant const RenderParams* prm,
                        __global const Light* restrict lights, __global const Ray* restrict rays,
                        __global const Hit* restrict hits, uint i,
                        __global float4* restrict radiance,
@@ -145,8 +151,8 @@ inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, __constant const Render
             sum += E * brdf;
             continue;
         }
-        const float3 T = shadow_transmittance(TRACE_ARGS, RENDER_GEOM_ARGS, prm, o.org, ldir, dist,
-                                              o.medium);
+        const float3 T = shadow_transmittance(TRACE_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm,
+                                              l, o.org, ldir, dist, o.medium);
         if (max3(T) <= 0.0f) continue;
         sum += T * E * brdf;
     }
@@ -156,7 +162,8 @@ inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, __constant const Render
 #if TRACE_COOP
 /* The shadow rays of the n hits of a level: a work-group per ray while few (and ``allowed``),
  * else a work-item per ray; ``allowed`` uniform over the work-group. */
-inline void shadow_rays_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+inline void shadow_rays_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
+                             __constant const RenderParams* prm,
                              __global const Light* restrict lights,
                              __global const Ray* restrict rays,
                              __global const Hit* restrict hits, const uint n, const bool allowed,
@@ -166,7 +173,8 @@ inline void shadow_rays_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const 
 {
     const bool on = allowed && n <= TRACE_COOP_MAX_RAYS;
     TRACE_COOP_FOR(i, n, on)
-        shadow_ray(TRACE_COOP_IF_ARGS(coop, on), RENDER_GEOM_ARGS, prm, lights, rays, hits, i,
+        shadow_ray(TRACE_COOP_IF_ARGS(coop, on), RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
+                   rays, hits, i,
                    radiance, caustic_map, cp);
 }
 #endif

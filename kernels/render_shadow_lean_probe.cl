@@ -74,7 +74,7 @@ __kernel void render_shadow_emit(RENDER_GEOM_PARAMS, __constant const RenderPara
     }
 }
 
-__kernel void render_shadow_lean(SCENE_PARAMS, RENDER_GEOM_PARAMS,
+__kernel void render_shadow_lean(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
                                  __constant const RenderParams* prm,
                                  __global const Ray* restrict list,
                                  __global const uint* restrict list_counts, const uint capacity,
@@ -83,9 +83,9 @@ __kernel void render_shadow_lean(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     const uint front = list_counts[0], n = front + list_counts[1];
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
         const Ray s = list[j < front ? j : capacity - 1u - (j - front)];
-        const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm,
-                                              ray_org(&s), ray_dir(&s), as_float(s.sample),
-                                              s.medium);
+        const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS,
+                                              LIGHT_BUFFER_ARGS, prm, 0u, ray_org(&s),
+                                              ray_dir(&s), as_float(s.sample), s.medium);
         if (max3(T) > 0.0f) radiance[s.pixel] += (float4)(T * ray_weight(&s), 0.0f);
     }
 }

@@ -25,14 +25,15 @@ __kernel void render_shadow_trace(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                   __global const Hit* restrict shadow_hits,
                                   __global float4* restrict shadow_radiance,
                                   __global const float4* restrict caustic_map,
-                                  const CausticParams cprm, __global const Ray* restrict rays,
+                                  const CausticParams cprm, LIGHT_BUFFER_PARAMS,
+                                  __global const Ray* restrict rays,
                                   __global Hit* restrict hits)
 {
     const uint n_shadow = counts[depth - 1u], n = n_shadow + counts[depth];
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
         if (j < n_shadow) {
-            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits, j,
-                       shadow_radiance, caustic_map, &cprm);
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
+                       shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm);
         } else {
             const uint i = j - n_shadow;
             const Ray r = rays[i];
@@ -50,7 +51,7 @@ __kernel void render_shadow_trace_shade(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                         __global const Hit* restrict shadow_hits,
                                         __global float4* restrict shadow_radiance,
                                         __global const float4* restrict caustic_map,
-                                        const CausticParams cprm,
+                                        const CausticParams cprm, LIGHT_BUFFER_PARAMS,
                                         __constant const Camera* cam,
                                         __global const Ray* restrict rays,
                                         __global Hit* restrict hits,
@@ -61,8 +62,8 @@ __kernel void render_shadow_trace_shade(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     const uint n_shadow = counts[depth - 1u], n = n_shadow + counts[depth];
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
         if (j < n_shadow) {
-            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits, j,
-                       shadow_radiance, caustic_map, &cprm);
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
+                       shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm);
         } else {
             const uint i = j - n_shadow;
             const Ray r = rays[i];
@@ -85,6 +86,7 @@ render_shadow_trace_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Re
                            __global const Hit* restrict shadow_hits,
                            __global float4* restrict shadow_radiance,
                            __global const float4* restrict caustic_map, const CausticParams cprm,
+                           LIGHT_BUFFER_PARAMS,
                            __global const Ray* restrict rays, __global Hit* restrict hits)
 {
     __local RenderBins bins;
@@ -96,8 +98,8 @@ render_shadow_trace_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Re
                                                                     j, n_shadow, n, &cprm));
         if (i >= n) continue;
         if (i < n_shadow) {
-            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
-                       i, shadow_radiance, caustic_map, &cprm);
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
+                       shadow_rays, shadow_hits, i, shadow_radiance, caustic_map, &cprm);
         } else {
             const Ray r = rays[i - n_shadow];
             hits[i - n_shadow] = trace_ray(TRACE_SERIAL_ARGS, &r, depth);
@@ -114,7 +116,8 @@ render_shadow_trace_shade_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                  __global const Hit* restrict shadow_hits,
                                  __global float4* restrict shadow_radiance,
                                  __global const float4* restrict caustic_map,
-                                 const CausticParams cprm, __constant const Camera* cam,
+                                 const CausticParams cprm, LIGHT_BUFFER_PARAMS,
+                                 __constant const Camera* cam,
                                  __global const Ray* restrict rays, __global Hit* restrict hits,
                                  __global float4* restrict radiance,
                                  __global uint* restrict child_counts,
@@ -129,8 +132,8 @@ render_shadow_trace_shade_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                                                     j, n_shadow, n, &cprm));
         if (i >= n) continue;
         if (i < n_shadow) {
-            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
-                       i, shadow_radiance, caustic_map, &cprm);
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
+                       shadow_rays, shadow_hits, i, shadow_radiance, caustic_map, &cprm);
         } else {
             const uint t = i - n_shadow;
             const Ray r = rays[t];
@@ -151,13 +154,15 @@ render_shadow_trace_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Rend
                          __global const Hit* restrict shadow_hits,
                          __global float4* restrict shadow_radiance,
                          __global const float4* restrict caustic_map, const CausticParams cprm,
+                         LIGHT_BUFFER_PARAMS,
                          __global const Ray* restrict rays, __global Hit* restrict hits,
                          const uint coop_shadow)
 {
     __local TraceCoop coop;
     /* level depth - 1's shadow rays a group each only from coop_from on (coop_shadow) */
-    shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
-                     counts[depth - 1u], coop_shadow, shadow_radiance, caustic_map, &cprm, &coop);
+    shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, shadow_rays,
+                     shadow_hits, counts[depth - 1u], coop_shadow, shadow_radiance, caustic_map,
+                     &cprm, &coop);
     trace_rays_coop(SCENE_ARGS, rays, counts[depth], depth, hits, &coop);
 }
 
@@ -170,7 +175,8 @@ render_shadow_trace_shade_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                __global const Hit* restrict shadow_hits,
                                __global float4* restrict shadow_radiance,
                                __global const float4* restrict caustic_map,
-                               const CausticParams cprm, __constant const Camera* cam,
+                               const CausticParams cprm, LIGHT_BUFFER_PARAMS,
+                               __constant const Camera* cam,
                                __global const Ray* restrict rays, __global Hit* restrict hits,
                                __global float4* restrict radiance,
                                __global uint* restrict child_counts, __global Aov* restrict aov,
@@ -178,8 +184,9 @@ render_shadow_trace_shade_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS,
 {
     __local TraceCoop coop;
     /* level depth - 1's shadow rays a group each only from coop_from on (coop_shadow) */
-    shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, lights, shadow_rays, shadow_hits,
-                     counts[depth - 1u], coop_shadow, shadow_radiance, caustic_map, &cprm, &coop);
+    shadow_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, shadow_rays,
+                     shadow_hits, counts[depth - 1u], coop_shadow, shadow_radiance, caustic_map,
+                     &cprm, &coop);
     trace_shade_rays_coop(SCENE_ARGS, RENDER_GEOM_ARGS, prm, cam, rays, counts[depth], depth,
                           hits, radiance, child_counts, aov, write_aov, &coop);
 }

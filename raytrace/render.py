@@ -80,12 +80,15 @@ from kernels.pinned import PinnedRing, ReadHandle
 from kernels.runtime import Runtime
 from raytrace.bvh import HIT_DTYPE
 from raytrace.caustics import CAUSTIC_PARAMS
+from raytrace.light_buffer import MAX_CELLS as MAX_LIGHT_BUFFER_CELLS
+from raytrace.light_buffer import LightBuffer
 from raytrace.query import COOP_MAX_GROUPS, COOP_MAX_RAYS, COOP_WIDTH
 from raytrace.render_scene import RenderScene
 from raytrace.render_types import (
     AOV,
     CAMERA,
     GATHER_PARAMS,
+    MASK_OPAQUE,
     MAX_DEPTH,
     RAY,
     RAYGEN_PARAMS,
@@ -143,6 +146,10 @@ class RenderSettings:
     direct_crossings: bool = True  #: a shadow ray's crossings of the scene's one instance
                                    #: holding dielectrics (the water) walk it alone, with no
                                    #: TLAS walk (RenderScene.crossing_instance); the same image
+    light_buffer: int = 0         #: cells along the longer side of each directional light's
+                                  #: map of the opaque triangles' shadows (raytrace.light_buffer:
+                                  #: the shadow rays' any-hit query without a BVH walk, the
+                                  #: same image); 0: none
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -163,6 +170,10 @@ class RenderSettings:
             raise ValueError(f"local_size must be 32, 64, 128, 256 or 512, got {self.local_size}")
         if not 1.0 <= self.capacity_factor <= 64:
             raise ValueError(f"capacity_factor must lie in [1, 64], got {self.capacity_factor}")
+        lb = self.light_buffer
+        if not isinstance(lb, int | np.integer) or not 0 <= lb <= MAX_LIGHT_BUFFER_CELLS:
+            raise ValueError(f"render light_buffer must be an integer in "
+                             f"[0, {MAX_LIGHT_BUFFER_CELLS}], got {lb!r}")
         pattern = self.pattern or ("center" if self.spp == 1 else
                                    "rgss" if self.spp == 4 else "jittered")
         p = SamplePattern.from_str(pattern)
@@ -217,6 +228,17 @@ def device_cost_bins(rt: Runtime) -> bool:
     """``cost_bins`` on ``rt``'s device: on a GPU, whose warps run as long as their costliest
     lane; off on a CPU (a work-item per core: nothing to regroup)."""
     return bool(rt.is_gpu)
+
+
+#: ``light_buffer`` on a GPU: cells along a map's longer side.
+GPU_LIGHT_BUFFER = 1024
+
+
+def device_light_buffer(rt: Runtime) -> int:
+    """``light_buffer`` on ``rt``'s device: :data:`GPU_LIGHT_BUFFER` cells on a GPU; none on a
+    CPU, whose wide-BVH any-hit query costs about what the map's per-frame raster does (PoCL,
+    2 cores, the baseline scene at 480x270: 0.11 s a frame either way)."""
+    return GPU_LIGHT_BUFFER if rt.is_gpu else 0
 
 
 def jitter_cols(spp: int) -> int:
@@ -305,6 +327,8 @@ class Renderer:
         # the caustic map render_shadow reads under the water (raytrace.caustics); off until set
         self.caustic_map = rt.buffer(16)
         self.caustic_params = np.zeros(1, CAUSTIC_PARAMS)[0]
+        # the directional lights' maps of what blocks them (raytrace.light_buffer)
+        self.light_buffer = LightBuffer(rt, s.light_buffer)
         # this renderer's own kernels: raygen, and per depth level trace/shade/scan/gather
         self.k_raygen = rt.kernel_launcher("render_raygen.cl", "render_raygen",
                                            stage="render.raygen")
@@ -517,7 +541,8 @@ class Renderer:
                              f"renderer's kernels were built for {self.rt.bvh_layout!r}")
         scene = self.scene.scene.trace_bindings()
         geom = self.scene.shade_bindings()
-        bufs = (*scene.values(), *geom.values(), self.scene.light_buf)
+        lbuf = self.light_buffer.bindings()
+        bufs = (*scene.values(), *geom.values(), self.scene.light_buf, *lbuf.values())
         self._depth_kernels(levels)
         old = self._bound_sig
         if old is not None and len(old) == len(bufs) and all(
@@ -537,7 +562,7 @@ class Renderer:
             k["trace_shade"].bind(**scene, **shading, cam=self.camera_buf, **wave,
                                   hits=hits, **out)
             light = {"lights": self.scene.light_buf, "caustic_map": self.caustic_map,
-                     "cprm": self.caustic_params}
+                     "cprm": self.caustic_params, **lbuf}
             for f in ("", "_binned"):   # the binned flavour: the plain kernel's arguments
                 if "shadow" + f in k:
                     k["shadow" + f].bind(**scene, **shading, **light, **wave, hits=hits,
@@ -650,8 +675,10 @@ class Renderer:
         # no material reflects or refracts: no secondary wavefront can exist, launch none
         deepest = s.bounces if self.scene.has_secondary else 0
         self._levels = deepest
+        self.light_buffer.plan(self.scene, self.any_hit_mask)
         self._bind(deepest)
         self._bind_caustics()
+        self.light_buffer.enqueue(self.scene.transform_buffer)
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
         sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
         # levels of few rays by the last counts: their trace and shadow rays one per work-group,
@@ -825,6 +852,12 @@ class Renderer:
         st = h.array
         self._last_hint = tuple(st[: self.settings.bounces + 1].tolist()) if h.valid else None
         return self._last_hint
+
+    @property
+    def any_hit_mask(self) -> int:
+        """The instances a shadow ray's any-hit query sees (render_shadow.h): the opaque ones
+        when the scene has a dielectric (its surfaces are crossed apart), else all."""
+        return MASK_OPAQUE if self.scene.has_dielectric else 0xFFFFFFFF
 
     def _upload_inputs(self) -> None:
         """Copy the camera and the RenderParams record to the device when they changed."""

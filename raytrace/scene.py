@@ -278,6 +278,11 @@ class Scene:
             rt.queue, self.transform_buffer, np.ascontiguousarray(rows, np.float32),
             dst_offset=TRANSFORM_DTYPE.itemsize * i, is_blocking=False))
 
+    def read_host_transforms(self) -> np.ndarray:
+        """(n_instances, 3, 4) float32 world_from_object rows as the host last wrote them (a
+        device stage may have moved one since: :meth:`read_transforms`); no device work."""
+        return self._xforms.copy()
+
     def read_transforms(self) -> np.ndarray:
         """(n_instances, 3, 4) float32 world_from_object rows as on the device (synchronises;
         tests and references)."""

@@ -1,0 +1,83 @@
+/* The light buffer (Haines & Greenberg 1986): for a directional light, a map of cells across the
+ * light's direction, each listing the opaque triangles whose shadow falls on it. Every point on a
+ * light ray projects to the same cell, so a shadow ray toward that light can only be blocked by
+ * the triangles its origin's cell lists: tested there (the traversal's own triangle test, in
+ * each instance's object space, the same floats as its BLAS), the answer is the any-hit
+ * traversal's, bit for bit, with no tree walked. A cell that lists more than LB_SLOTS
+ * triangles, or an origin off the map while some triangle reached past it, says "unknown" and
+ * the ray walks the BVH as before. Built on the device every frame from the scene's transform
+ * rows (light_buffer.cl); raytrace/light_buffer.py plans it. */
+#ifndef LBWATER_LIGHT_BUFFER_H
+#define LBWATER_LIGHT_BUFFER_H
+
+#include "traverse.h"
+
+/* triangles a cell lists; a cell with more says "unknown" */
+#define LB_SLOTS 8
+/* a triangle over more cells is rastered by a work-group (light_buffer_raster_big) */
+#define LB_SMALL_CELLS 32
+/* work-items per triangle there */
+#define LB_RASTER_WG 64
+/* light_buffer_blocked's answers */
+#define LB_UNKNOWN (-1)
+#define LB_CLEAR 0
+#define LB_BLOCKED 1
+
+/* 80 bytes. Light l's map (lb_maps[l]; n_u == 0: none, its rays walk the BVH). A point p lies
+ * in cell (floor(cu), floor(cv)), cu = dot(p, u.xyz) + u.w, likewise cv; its depth toward the
+ * light is dot(p, toward.xyz). */
+typedef struct {
+    float4 u;          /* xyz: the map's first axis in cells per metre; w: offset (cells) */
+    float4 v;          /* xyz: the second axis; w: offset */
+    float4 toward;     /* xyz: unit direction toward the light (its direction negated) */
+    int n_u, n_v;      /* cells along u and v */
+    int cell_base;     /* the map's first cell in lb_cells (its slots: LB_SLOTS per cell) */
+    int outside_cell;  /* lb_cells[outside_cell].x: triangles that reach off the map */
+    int big_cell;      /* lb_cells[big_cell].x: triangles left to light_buffer_raster_big */
+    float margin;      /* cells a triangle's footprint grows by: rounding of the projections */
+    float depth_slack; /* metres a cell's depth bound grows by: rounding of the depths */
+    float pad;
+} LightBuffer;
+
+/* The kernel parameters of a stage that reads the light buffer (shadow rays), and their names.
+ * lb_cells[c]: x = triangles listed (the first LB_SLOTS in lb_slots[c * LB_SLOTS ..]),
+ * y = float_to_ordered of the nearest-to-the-light depth any of them reaches over the cell;
+ * lb_tris: three float4 per listed triangle, its object-space vertices,
+     p0.w = as_float(instance). */
+#define LIGHT_BUFFER_PARAMS                                                                   \
+    __global const LightBuffer* restrict lb_maps, __global const int2* restrict lb_cells,   \
+        __global const int* restrict lb_slots, __global const float4* restrict lb_tris
+#define LIGHT_BUFFER_ARGS lb_maps, lb_cells, lb_slots, lb_tris
+
+/* Whether a shadow ray from org along dir (toward light l) within [0, tmax) is blocked by an
+ * opaque triangle of the map: LB_BLOCKED, LB_CLEAR, or LB_UNKNOWN (no map, a full cell, off a map
+ * that some triangle reached past): walk the BVH. */
+inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* restrict instances,
+                                uint light, float3 org, float3 dir, float tmax)
+{
+    const LightBuffer m = lb_maps[light];
+    if (m.n_u == 0) return LB_UNKNOWN;
+    const float cu = dot(org, m.u.xyz) + m.u.w, cv = dot(org, m.v.xyz) + m.v.w;
+    if (!(cu >= 0.0f && cu < (float)m.n_u && cv >= 0.0f && cv < (float)m.n_v))
+        return lb_cells[m.outside_cell].x ? LB_UNKNOWN : LB_CLEAR;
+    const int cell = m.cell_base + (int)cv * m.n_u + (int)cu;
+    const int2 c = lb_cells[cell];
+    if (c.x == 0 || dot(org, m.toward.xyz) > ordered_to_float(c.y)) return LB_CLEAR;
+    if (c.x > LB_SLOTS) return LB_UNKNOWN;
+    int inst = -1;
+    TraceRay r;
+    for (int k = 0; k < c.x; ++k) {
+        const int t = lb_slots[cell * LB_SLOTS + k];
+        const float4 p0 = lb_tris[3 * t], p1 = lb_tris[3 * t + 1], p2 = lb_tris[3 * t + 2];
+        if (as_int(p0.w) != inst) {
+            inst = as_int(p0.w);
+            r = trace_object_ray(instances + inst, org, dir);
+        }
+        float th, uh, vh;
+        if (trace_triangle(&r, p0.xyz, p1.xyz, p2.xyz, 0.0f, tmax, &th, &uh, &vh))
+            return LB_BLOCKED;
+    }
+    return LB_CLEAR;
+}
+
+#endif

@@ -1,0 +1,227 @@
+"""The light buffer's host side (kernels/light_buffer.h, light_buffer.cl): which lights get a
+map, where each map lies, the triangles it lists, and the per-frame build.
+
+A shadow ray toward a directional light can only be blocked by the opaque triangles whose
+shadow falls where its origin does. The map lists them per cell; the shadow kernels test those
+few (the traversal's own triangle test, so the answer is the BVH's, bit for bit) instead of
+walking the TLAS and BLASes, and fall back to the walk where a cell lists more than ``LB_SLOTS``.
+What it covers: the instances the shadow rays' any-hit query sees (the opaque ones when the
+scene has a dielectric, else all), when each is a mesh the host holds; none otherwise (a height
+field, a mesh given as device buffers), and no spot light (their rays walk the BVH as before).
+
+Per frame (:meth:`LightBuffer.enqueue`): ``light_buffer_clear`` over every map's cells, then per
+map ``light_buffer_raster`` (a work-group per triangle, moved by its instance's live transform
+row: a boat that a device stage moves is followed with no host copy).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from kernels.runtime import Runtime
+from raytrace.render_types import MAX_LIGHTS, LightKind
+
+_F4 = (np.float32, 4)
+#: Mirror of ``LightBuffer`` (kernels/light_buffer.h), 80 bytes.
+LIGHT_BUFFER = np.dtype([("u", _F4), ("v", _F4), ("toward", _F4), ("n_u", np.int32),
+                         ("n_v", np.int32), ("cell_base", np.int32), ("outside_cell", np.int32),
+                         ("big_cell", np.int32), ("margin", np.float32),
+                         ("depth_slack", np.float32), ("pad", np.float32)])
+LB_SLOTS = 8            #: kernels/light_buffer.h
+LB_RASTER_WG = 64       #: kernels/light_buffer.h
+#: Most cells along a map's side.
+MAX_CELLS = 8192
+#: Most triangles listed: past it the per-frame raster would cost more than the walks it saves.
+MAX_TRIANGLES = 1 << 20
+#: Cells a map's triangles' footprint may drift past the footprint they had when it was planned
+#: (a floating boat), as a fraction of the map's extent on each side.
+DOMAIN_PAD = 0.1
+#: Most work-items light_buffer_raster starts (they stride over the triangles).
+_MAX_ITEMS = 1 << 20
+
+
+class LightBuffer:
+    """The maps of one renderer: ``cells`` along a map's longer side (0: none)."""
+
+    def __init__(self, rt: Runtime, cells: int, stage: str = "render.light_buffer"):
+        cells = int(cells)
+        if not 0 <= cells <= MAX_CELLS:
+            raise ValueError(f"light buffer cells must lie in [0, {MAX_CELLS}], got {cells}")
+        self.rt, self.cells, self.stage = rt, cells, stage
+        self.maps = np.zeros(MAX_LIGHTS, LIGHT_BUFFER)
+        self.n_tris = 0
+        self.n_cells = 0
+        self.reason = "not planned"    #: why no light has a map ("" when one has)
+        self._key = None
+        self._alloc(np.zeros((1, 4), np.float32), 1)
+        self._clear = rt.kernel_launcher("light_buffer.cl", "light_buffer_clear", stage=stage)
+        self._raster = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster", stage=stage)
+        self._raster_big = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster_big",
+                                              stage=stage)
+        # the big triangles' work-groups: a few per compute unit (they stride over the list)
+        self._big_groups = 4 * rt.device.max_compute_units
+
+    def _alloc(self, tris: np.ndarray, n_cells: int) -> None:
+        rt = self.rt
+        self.maps_buf = rt.to_device(self.maps)
+        self.tris_buf = rt.to_device(tris)
+        self.cells_buf = rt.buffer(8 * max(n_cells, 1))
+        self.slots_buf = rt.buffer(4 * LB_SLOTS * max(n_cells, 1))
+        self.big_buf = rt.buffer(4 * max(len(tris) // 3, 1))   # light_buffer_raster_big's list
+
+    @property
+    def active(self) -> bool:
+        """Whether any light has a map."""
+        return bool((self.maps["n_u"] > 0).any())
+
+    def bindings(self) -> dict:
+        """``LIGHT_BUFFER_PARAMS`` (kernels/light_buffer.h) by name."""
+        return {"lb_maps": self.maps_buf, "lb_cells": self.cells_buf,
+                "lb_slots": self.slots_buf, "lb_tris": self.tris_buf}
+
+    # -- planning --------------------------------------------------------------------------
+    def plan(self, render_scene, any_hit_mask: int) -> bool:
+        """Decide the maps for ``render_scene`` (after its update: masks and lights set) whose
+        shadow rays' any-hit query sees the instances of ``any_hit_mask``; redone only when the
+        meshes, instances, masks or lights changed. True when the buffers were replaced (the
+        kernels must be bound again)."""
+        sc = render_scene.scene
+        masks = tuple(sc.instance_mask(i) for i in range(sc.n_instances))
+        key = (self.cells, len(render_scene.meshes), masks, render_scene.lights.tobytes(),
+               int(any_hit_mask))
+        if key == self._key:
+            return False
+        self._key = key
+        self.maps = np.zeros(MAX_LIGHTS, LIGHT_BUFFER)
+        tris, self.reason = self._triangles(render_scene, masks, int(any_hit_mask))
+        lights = render_scene.lights
+        directional = [i for i in range(len(lights))
+                       if int(lights[i]["kind"]) == int(LightKind.DIRECTIONAL)]
+        if not directional and not self.reason:
+            self.reason = "no directional light"
+        n_cells = 0
+        if not self.reason:
+            world = self._world_points(render_scene, masks, int(any_hit_mask))
+            for i in directional:
+                n_cells = self._plan_map(i, -lights[i]["direction"][:3], world, n_cells)
+        self.n_tris = 0 if self.reason else len(tris) // 3
+        self.n_cells = n_cells
+        self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells)
+        return True
+
+    def _triangles(self, render_scene, masks, mask: int) -> tuple[np.ndarray, str]:
+        """lb_tris: three float4 per triangle of the instances ``mask`` sees, object space,
+        p0.w = the instance id's bits; or an empty array and why there is none."""
+        if self.cells == 0:
+            return np.zeros((0, 4), np.float32), "off"
+        out, n = [], 0
+        for inst, m in enumerate(masks):
+            if not m & mask:
+                continue
+            mesh = render_scene.meshes[int(render_scene.instances[inst]["mesh"])]
+            if mesh["vertices"] is None or mesh["dynamic"]:
+                return np.zeros((0, 4), np.float32), (
+                    f"instance {inst} is a mesh the device writes (a height field or dynamic)")
+            v = np.asarray(mesh["vertices"], np.float32)
+            t = np.asarray(mesh["triangles"], np.int64)
+            q = np.zeros((len(t), 3, 4), np.float32)
+            q[:, :, :3] = v[t]
+            q[:, 0, 3] = np.array([inst], np.int32).view(np.float32)[0]
+            out.append(q.reshape(-1, 4))
+            n += len(t)
+            if n > MAX_TRIANGLES:
+                return np.zeros((0, 4), np.float32), f"more than {MAX_TRIANGLES} triangles"
+        if not out:
+            return np.zeros((0, 4), np.float32), ""
+        return np.concatenate(out), ""
+
+    @staticmethod
+    def _world_points(render_scene, masks, mask: int) -> np.ndarray:
+        """The listed instances' vertices in world space by the transforms the host wrote."""
+        sc = render_scene.scene
+        rows = sc.read_host_transforms()
+        pts = [np.zeros((0, 3))]
+        for inst, m in enumerate(masks):
+            if m & mask:
+                mesh = render_scene.meshes[int(render_scene.instances[inst]["mesh"])]
+                v = np.asarray(mesh["vertices"], np.float64)
+                r = rows[inst].astype(np.float64)
+                pts.append(v @ r[:, :3].T + r[:, 3])
+        return np.concatenate(pts)
+
+    def _plan_map(self, light: int, toward, world: np.ndarray, n_cells: int) -> int:
+        """Map ``light`` across the unit direction ``toward`` over the footprint of ``world``
+        (padded by DOMAIN_PAD); returns the cells used so far."""
+        m = self.maps[light]
+        t32 = np.asarray(toward, np.float32)
+        t = t32.astype(np.float64)
+        a = np.array([1.0, 0.0, 0.0]) if abs(t[1]) < 0.9 else np.array([0.0, 0.0, 1.0])
+        eu = np.cross(a, t)
+        eu /= np.linalg.norm(eu)
+        ev = np.cross(t, eu)
+        if len(world):
+            pu, pv = world @ eu, world @ ev
+            lo = np.array([pu.min(), pv.min()])
+            hi = np.array([pu.max(), pv.max()])
+            reach = float(np.abs(world).max())
+        else:
+            lo, hi, reach = np.zeros(2), np.ones(2), 1.0
+        ext = np.maximum(hi - lo, 1e-6)
+        lo, hi = lo - DOMAIN_PAD * ext, hi + DOMAIN_PAD * ext
+        size = float((hi - lo).max()) / self.cells
+        n_u, n_v = (int(np.ceil((hi[k] - lo[k]) / size)) for k in (0, 1))
+        n_u, n_v = max(1, min(n_u, self.cells)), max(1, min(n_v, self.cells))
+        m["u"] = (*(eu / size), -lo[0] / size)
+        m["v"] = (*(ev / size), -lo[1] / size)
+        m["toward"][:3] = t32
+        m["n_u"], m["n_v"], m["cell_base"] = n_u, n_v, n_cells
+        m["outside_cell"] = n_cells + n_u * n_v
+        m["big_cell"] = n_cells + n_u * n_v + 1
+        # float32 rounding of the projections and depths: ~1e-6 of the coordinates, grown 10x
+        scale = reach + float((hi - lo).max())
+        m["margin"] = 1.0 / 64 + 1e-5 * scale / size
+        m["depth_slack"] = 1e-5 * scale
+        return n_cells + n_u * n_v + 2
+
+    # -- per frame -------------------------------------------------------------------------
+    def enqueue(self, transform_buffer: cl.Buffer) -> None:
+        """Clear and fill every map from the instances' live transform rows (enqueued)."""
+        if not self.active:
+            return
+        self._clear.bind(lb_cells=self.cells_buf, n_cells=self.n_cells)
+        self._clear.launch(self.n_cells, 256)
+        if self.n_tris == 0:
+            return
+        bufs = {"lb_maps": self.maps_buf, "lb_tris": self.tris_buf, "xforms": transform_buffer,
+                "lb_cells": self.cells_buf, "lb_slots": self.slots_buf, "lb_big": self.big_buf}
+        self._raster.bind(**bufs, n_tris=self.n_tris)
+        self._raster_big.bind(**bufs)
+        items = min(self.n_tris, _MAX_ITEMS)
+        for light in np.flatnonzero(self.maps["n_u"] > 0):
+            self._raster.bind(light=int(light))
+            self._raster.launch(-(-items // 64) * 64, 64)
+            self._raster_big.bind(light=int(light))
+            self._raster_big.launch(self._big_groups * LB_RASTER_WG, LB_RASTER_WG)
+
+    def read(self, light: int) -> dict:
+        """Light ``light``'s map as host arrays (synchronises; tests and studies): ``count``
+        and ``depth`` (n_v, n_u), ``slots`` (n_v, n_u, LB_SLOTS), ``outside``."""
+        m = self.maps[light]
+        if m["n_u"] == 0:
+            raise ValueError(f"light {light} has no map ({self.reason or 'not directional'})")
+        n = int(m["n_u"] * m["n_v"])
+        base = int(m["cell_base"])
+        cells = self.rt.to_host(self.cells_buf, np.int32, 2 * (n + 2), 2 * base).reshape(-1, 2)
+        slots = self.rt.to_host(self.slots_buf, np.int32, LB_SLOTS * n, LB_SLOTS * base)
+        shape = (int(m["n_v"]), int(m["n_u"]))
+        return {"count": cells[:n, 0].reshape(shape),
+                "depth": ordered_to_float(cells[:n, 1]).reshape(shape),
+                "slots": slots.reshape(*shape, LB_SLOTS), "outside": int(cells[n, 0]),
+                "big": int(cells[n + 1, 0])}
+
+
+def ordered_to_float(i: np.ndarray) -> np.ndarray:
+    """kernels/bvh.h's ordered_to_float over an int32 array."""
+    i = np.asarray(i, np.int32)
+    return np.where(i >= 0, i, i ^ np.int32(0x7FFFFFFF)).astype(np.int32).view(np.float32)

@@ -1,0 +1,323 @@
+"""The light buffer (kernels/light_buffer.cl, raytrace/light_buffer.py): its cells list every
+triangle whose shadow meets them and few more (a float64 NumPy raster of the same projection),
+their depth bounds hold over the cell (float64 clipping), its answers are the BVH's any-hit
+answers, and frames rendered with it are the frames rendered without it, byte for byte."""
+
+import dataclasses
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from kernels.layout import check_struct
+from raytrace.light_buffer import LB_SLOTS, LIGHT_BUFFER, LightBuffer
+from raytrace.render import Renderer, RenderSettings
+from raytrace.render_scene import Material, RenderScene
+from raytrace.render_types import MASK_OPAQUE
+from tests.raytrace.test_render_dynamic import grid, surface
+from tests.raytrace.test_render_plans import BOX, CAMERAS
+
+SUN = (-0.45, -0.8, -0.35)
+
+
+def test_layout_matches_the_device(rt):
+    check_struct(rt, "light_buffer.h", "LightBuffer", LIGHT_BUFFER)
+
+
+def rotation(yaw: float, pitch: float) -> np.ndarray:
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rx = np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
+    return ry @ rx
+
+
+def clutter(rt, *, glass: bool = True, spot: bool = False, seed: int = 3) -> RenderScene:
+    """A floor, two boxes (one turned and scaled), 60 small random triangles above the floor,
+    a glass box (a dielectric: the opaque instances alone are mapped) and the sun."""
+    rng = np.random.default_rng(seed)
+    sc = RenderScene(rt)
+    floor = sc.add_material(Material(diffuse=(0.8, 0.7, 0.5)))
+    red = sc.add_material(Material(diffuse=(0.7, 0.2, 0.1), specular=(0.4, 0.4, 0.4),
+                                   shininess=30, reflectivity=0.2))
+    quad = np.array([[-1.5, 0, -1.5], [1.5, 0, -1.5], [1.5, 0, 1.5], [-1.5, 0, 1.5]])
+    sc.add_instance(sc.add_mesh(quad, [[0, 2, 1], [0, 3, 2]], material=floor))
+    box = sc.add_mesh(*BOX, material=red)
+    sc.add_instance(box, np.array([[1, 0, 0, 0.7], [0, 1, 0, 0], [0, 0, 1, -0.4], [0, 0, 0, 1]]))
+    m = np.eye(4)
+    m[:3, :3] = 0.6 * rotation(0.7, 0.3)
+    m[:3, 3] = (-0.6, 0.35, 0.5)
+    sc.add_instance(box, m)
+    centres = rng.uniform((-1.2, 0.3, -1.2), (1.2, 1.2, 1.2), (60, 1, 3))
+    tris = (centres + rng.normal(0, 0.08, (60, 3, 3))).reshape(-1, 3)
+    sc.add_instance(sc.add_mesh(tris, np.arange(180).reshape(60, 3), material=red))
+    if glass:
+        g = sc.add_material(Material(diffuse=(0.1, 0.2, 0.3), ior=1.33, reflectivity=0.1))
+        sc.add_instance(sc.add_mesh(*BOX, material=g),
+                        np.array([[1, 0, 0, -0.2], [0, 1, 0, 0], [0, 0, 1, -0.9], [0, 0, 0, 1]]))
+    sc.add_light("directional", direction=SUN, color=(1.2, 1.1, 1.0))
+    if spot:
+        sc.add_light("spot", position=(0.5, 2.5, 0.8), direction=(0, -1, 0), color=(3, 3, 3),
+                     inner_angle=25, outer_angle=40)
+    return sc
+
+
+def built(rt, sc, cells: int) -> LightBuffer:
+    sc.update()
+    lb = LightBuffer(rt, cells)
+    lb.plan(sc, MASK_OPAQUE if sc.has_dielectric else 0xFFFFFFFF)
+    lb.enqueue(sc.transform_buffer)
+    return lb
+
+
+# -- the float64 reference ------------------------------------------------------------------
+def world_triangles(sc, lb) -> tuple[np.ndarray, np.ndarray]:
+    """The listed triangles in world space (n, 3, 3) float64 and their instances."""
+    q = np.frombuffer(lb.rt.to_host(lb.tris_buf, np.float32, 4 * 3 * lb.n_tris).tobytes(),
+                      np.float32).reshape(-1, 3, 4)
+    inst = q[:, 0, 3].copy().view(np.int32)
+    rows = sc.scene.read_transforms().astype(np.float64)[inst]
+    p = q[:, :, :3].astype(np.float64)
+    return np.einsum("nij,nkj->nki", rows[:, :, :3], p) + rows[:, None, :, 3], inst
+
+
+def clip_max_depth(poly: np.ndarray, lo, hi) -> float:
+    """Most depth (column 2) over the 2D polygon (columns 0-1) clipped to [lo, hi]; -inf when
+    they do not meet (Sutherland-Hodgman, float64)."""
+    for axis in (0, 1):
+        for bound, keep in ((lo[axis], np.greater_equal), (hi[axis], np.less_equal)):
+            out = []
+            for k in range(len(poly)):
+                a, b = poly[k], poly[(k + 1) % len(poly)]
+                ina, inb = keep(a[axis], bound), keep(b[axis], bound)
+                if ina:
+                    out.append(a)
+                if ina != inb:
+                    t = (bound - a[axis]) / (b[axis] - a[axis])
+                    out.append(a + t * (b - a))
+            poly = np.array(out)
+            if len(poly) == 0:
+                return -np.inf
+    return float(poly[:, 2].max())
+
+
+def reference_cells(lb, light, world, grow: float):
+    """Per cell: {triangle: most depth over the triangle and the cell grown by ``grow``}."""
+    m = lb.maps[light]
+    u, v, t = (m[k].astype(np.float64) for k in ("u", "v", "toward"))
+    out: dict = {}
+    for k, tri in enumerate(world):
+        cu, cv, d = tri @ u[:3] + u[3], tri @ v[:3] + v[3], tri @ t[:3]
+        poly = np.stack([cu, cv, d], 1)
+        for j in range(max(0, int(np.floor(cv.min() - grow))),
+                       min(int(m["n_v"]), int(np.floor(cv.max() + grow)) + 1)):
+            for i in range(max(0, int(np.floor(cu.min() - grow))),
+                           min(int(m["n_u"]), int(np.floor(cu.max() + grow)) + 1)):
+                depth = clip_max_depth(poly, (i - grow, j - grow), (i + 1 + grow, j + 1 + grow))
+                if depth > -np.inf:
+                    out.setdefault((j, i), {})[k] = depth
+    return out
+
+
+def tris_of(cells, j, i) -> int:
+    return next(iter(cells[(j, i)]))
+
+
+def covers(lb, tri, j, i, grow: float) -> bool:
+    """Whether the triangle's footprint holds cell (j, i) grown by ``grow`` (float64)."""
+    m = lb.maps[0]
+    u, v = m["u"].astype(np.float64), m["v"].astype(np.float64)
+    p = np.stack([tri @ u[:3] + u[3], tri @ v[:3] + v[3]], 1)
+    corners = np.array([[i - grow, j - grow], [i + 1 + grow, j - grow],
+                        [i - grow, j + 1 + grow], [i + 1 + grow, j + 1 + grow]])
+    side = np.array([(p[(k + 1) % 3] - p[k])[0] * (corners - p[k])[:, 1]
+                     - (p[(k + 1) % 3] - p[k])[1] * (corners - p[k])[:, 0] for k in range(3)])
+    return bool((np.all(side >= 0, 0) | np.all(side <= 0, 0)).all())
+
+
+def test_cells_list_what_a_float64_raster_finds(rt):
+    sc = clutter(rt)
+    lb = built(rt, sc, 40)
+    assert lb.active and lb.reason == "" and lb.n_tris == 2 + 12 + 12 + 60
+    world, inst = world_triangles(sc, lb)
+    assert set(inst) == {0, 1, 2, 3}   # the glass box is crossed, not mapped
+    got = lb.read(0)
+    assert got["outside"] == 0 and got["big"] >= 2   # the floor's two halves by work-groups
+    must, may = reference_cells(lb, 0, world, 0.0), reference_cells(lb, 0, world, 0.25)
+    count, depth, slots = got["count"], got["depth"], got["slots"]
+    assert (count > 0).sum() >= len(must) > 0.3 * count.size
+    toward = lb.maps[0]["toward"][:3].astype(np.float64)
+    nearest = (world @ toward).max(1)   # each triangle's nearest vertex to the light
+    planar = 0
+    for (j, i), tris in must.items():
+        n = count[j, i]
+        assert n >= len(tris), (j, i)
+        assert n <= len(may[(j, i)]), (j, i)   # none beyond a quarter cell
+        if n <= LB_SLOTS:
+            assert set(tris) <= set(slots[j, i, :n].tolist()), (j, i)
+        # the bound holds over the cell, and is no looser than the nearest vertex
+        assert depth[j, i] >= max(tris.values()), (j, i)
+        assert depth[j, i] <= nearest[list(may[(j, i)])].max() + 1e-3, (j, i)
+        if len(may[(j, i)]) == 1 and covers(lb, world[tris_of(may, j, i)], j, i, 0.25):
+            # one triangle over the whole cell (the floor): its plane's bound
+            assert depth[j, i] <= max(may[(j, i)].values()) + 1e-3, (j, i)
+            planar += 1
+    assert planar > 0.2 * len(must)
+    listed = {(j, i) for j, i in zip(*np.nonzero(count), strict=True)}
+    assert listed <= set(may)
+    assert (count > LB_SLOTS).any() and (count <= LB_SLOTS).mean() > 0.9
+
+
+def answers(rt, sc, lb, light, org):
+    k = rt.kernel_launcher("light_buffer.cl", "light_buffer_answers", stage="test",
+                           defines=sc.scene.trace_defines)
+    org4 = np.zeros((len(org), 4), np.float32)
+    org4[:, :3] = org
+    out = rt.buffer(8 * len(org))
+    k.bind(**sc.scene.trace_bindings(), **lb.bindings(), light=light,
+           mask=MASK_OPAQUE if sc.has_dielectric else 0xFFFFFFFF, org=rt.to_device(org4),
+           n=len(org), out=out)
+    k.launch(len(org), 64)
+    return rt.to_host(out, np.int32, 2 * len(org)).reshape(-1, 2)
+
+
+def brute_force_blocked(world, org, toward) -> np.ndarray:
+    """float64 any-hit of rays org + t toward, t > 0, against every triangle (Moeller-Trumbore),
+    and whether each ray passes within 1e-5 of a triangle's edge (too close to call)."""
+    a, b, c = world[:, 0], world[:, 1], world[:, 2]
+    e1, e2 = b - a, c - a
+    p = np.cross(toward, e2)
+    det = (e1 * p).sum(1)
+    s = org[:, None, :] - a[None]
+    inv = 1.0 / np.where(det == 0, np.inf, det)
+    u = (s * p[None]).sum(2) * inv
+    q = np.cross(s, e1[None])
+    v = (q @ toward) * inv
+    t = (q * e2[None]).sum(2) * inv
+    hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-4)
+    near = np.minimum(np.minimum(np.abs(u), np.abs(v)), np.abs(1 - u - v)) < 1e-5
+    return hit.any(1), (near & (t > 0)).any(1)
+
+
+def test_answers_are_the_bvh_any_hit(rt):
+    sc = clutter(rt)
+    lb = built(rt, sc, 40)
+    rng = np.random.default_rng(7)
+    world, _ = world_triangles(sc, lb)
+    # points on the floor (offset up), on the triangles, and in the air
+    n = 3000
+    floor = np.c_[rng.uniform(-1.6, 1.6, n), np.full(n, 1e-3), rng.uniform(-1.6, 1.6, n)]
+    pick = rng.integers(0, len(world), n)
+    w = rng.dirichlet((1, 1, 1), n)
+    on_tris = np.einsum("nk,nki->ni", w, world[pick]) - 2e-3 * np.asarray(SUN)
+    air = rng.uniform((-2.5, 0, -2.5), (2.5, 1.5, 2.5), (n, 3))
+    org = np.concatenate([floor, on_tris, air]).astype(np.float32)
+    got = answers(rt, sc, lb, 0, org)
+    known = got[:, 0] >= 0
+    assert known.mean() > 0.9
+    assert np.array_equal(got[known, 0], got[known, 1])   # the BVH's answer, bit for bit
+    assert 0.1 < got[known, 1].mean() < 0.9               # both kinds of answer occur
+    toward = -np.asarray(SUN, np.float64) / np.linalg.norm(SUN)
+    blocked, near = brute_force_blocked(world, org.astype(np.float64), toward)
+    sure = known & ~near
+    assert sure.mean() > 0.85
+    assert np.array_equal(got[sure, 0] == 1, blocked[sure])
+
+
+def test_rays_off_the_map_walk_the_bvh_once_a_triangle_leaves_it(rt):
+    sc = clutter(rt, glass=False)
+    lb = built(rt, sc, 32)
+    far = np.array([[40.0, 0.5, 40.0], [-40.0, 0.2, 10.0]], np.float32)
+    assert answers(rt, sc, lb, 0, far)[:, 0].tolist() == [0, 0]   # nothing out there
+    sc.set_transform(3, np.array([[1, 0, 0, 30.0], [0, 1, 0, 0], [0, 0, 1, 30.0],
+                                  [0, 0, 0, 1]]))
+    sc.update()
+    lb.enqueue(sc.transform_buffer)   # the live rows: the moved instance is followed
+    assert lb.read(0)["outside"] > 0
+    got = answers(rt, sc, lb, 0, far)
+    assert got[:, 0].tolist() == [-1, -1]
+
+
+# -- frames with and without it ----------------------------------------------------------
+def frames_alike(rt, sc, settings, camera=CAMERAS[1], moves=()):
+    """The frames of ``sc`` with the map and without it, the instances moved between them."""
+    start = sc.scene.read_host_transforms()
+    out = []
+    for cells in (0, 48):
+        r = Renderer(rt, sc, dataclasses.replace(settings, light_buffer=cells))
+        r.set_camera(*camera, (0, 1, 0), 50)
+        imgs = [r.render()]
+        for inst, m in moves:
+            sc.set_transform(inst, m)
+            imgs.append(r.render())
+        for inst, _ in moves:   # back where they started for the next renderer
+            sc.set_transform(inst, np.vstack([start[inst], [0, 0, 0, 1]]))
+        out.append((imgs, r))
+    (off, _), (on, r_on) = out
+    for a, b in zip(off, on, strict=True):
+        assert np.array_equal(a, b)
+        assert a[..., :3].std() > 5
+    return r_on
+
+
+@pytest.mark.parametrize("chunk", [None, 96])
+def test_frames_are_the_frames_without_it(rt, chunk):
+    s = RenderSettings(width=24, height=18, bounces=3, spp=4, max_chunk_rays=chunk)
+    r = frames_alike(rt, clutter(rt), s)
+    assert r.light_buffer.active and r.light_buffer.read(0)["count"].sum() > 0
+
+
+def test_frames_follow_a_moved_instance(rt):
+    s = RenderSettings(width=24, height=18, bounces=2)
+    m = np.array([[0, 0, 1, -0.3], [0, 1, 0, 0.1], [-1, 0, 0, 0.2], [0, 0, 0, 1]])
+    frames_alike(rt, clutter(rt, glass=False), s, moves=[(1, m)])
+
+
+def test_spot_lights_walk_the_bvh_and_directional_ones_use_their_map(rt):
+    s = RenderSettings(width=24, height=18, bounces=2)
+    r = frames_alike(rt, clutter(rt, spot=True), s)
+    assert r.light_buffer.maps["n_u"][:2].tolist()[1] == 0 and r.light_buffer.maps["n_u"][0] > 0
+    with pytest.raises(ValueError, match="light 1 has no map"):
+        r.light_buffer.read(1)
+
+
+def test_a_device_written_mesh_leaves_every_light_without_a_map(rt):
+    sc = clutter(rt, glass=False)
+    v, _ = surface(6, 0.7)
+    mesh, vbuf, _ = sc.add_dynamic_mesh(len(v), grid(6))
+    cl.enqueue_copy(rt.queue, vbuf, v)
+    sc.add_instance(mesh)
+    r = frames_alike(rt, sc, RenderSettings(width=20, height=14, bounces=1))
+    assert not r.light_buffer.active and "device writes" in r.light_buffer.reason
+
+
+def test_settings_reject_a_size_out_of_range():
+    with pytest.raises(ValueError, match=r"light_buffer must be an integer in \[0, 8192\]"):
+        RenderSettings(light_buffer=-1).resolved()
+    with pytest.raises(ValueError, match="light_buffer must be"):
+        RenderSettings(light_buffer=1.5).resolved()
+
+
+def test_a_floating_boat_moved_on_the_device_is_followed(rt):
+    """scenes/pool.toml: the boat's transform row is written by the bodies stage (no host copy);
+    the frames with the map are the frames without it while it moves."""
+    from app.errors import InputError
+    from app.world import World
+
+    frames, poses = {}, {}
+    for cells in (0, 64):
+        w = World("scenes/pool.toml", rt, width=64, height=36, cells=40, light_buffer=cells)
+        frames[cells] = [w.frame(1 / 30)]
+        first = w.boat_poses()[0]
+        frames[cells] += [w.frame(1 / 30) for _ in range(2)]
+        poses[cells] = w.boat_poses()[0]
+        assert not np.array_equal(first, poses[cells])   # the boat moved meanwhile
+        if cells:
+            assert w.renderer.light_buffer.active
+            assert w.renderer.light_buffer.read(0)["count"].max() > 0
+    for a, b in zip(frames[0], frames[64], strict=True):
+        assert np.array_equal(a, b)
+    assert np.array_equal(poses[0], poses[64])
+    assert not np.array_equal(frames[64][0], frames[64][2])   # the water and boat moved
+    with pytest.raises(InputError, match=r"light_buffer -1 out of range; allowed None or an "
+                                         r"integer in \[0, 8192\]"):
+        World("scenes/pool.toml", rt, light_buffer=-1)
