@@ -259,9 +259,12 @@ def frames_alike(rt, sc, settings, camera=CAMERAS[1], moves=()):
     return r_on
 
 
-@pytest.mark.parametrize("chunk", [None, 96])
-def test_frames_are_the_frames_without_it(rt, chunk):
-    s = RenderSettings(width=24, height=18, bounces=3, spp=4, max_chunk_rays=chunk)
+@pytest.mark.parametrize("chunk,coop_from,bins", [(None, None, False), (96, None, False),
+                                                   (None, 1, True)])
+def test_frames_are_the_frames_without_it(rt, chunk, coop_from, bins):
+    """Every shadow kernel: alone, with the next level's trace, binned, cooperative."""
+    s = RenderSettings(width=24, height=18, bounces=3, spp=4, max_chunk_rays=chunk,
+                       coop_from=coop_from, cost_bins=bins, overlap_from=0)
     r = frames_alike(rt, clutter(rt), s)
     assert r.light_buffer.active and r.light_buffer.read(0)["count"].sum() > 0
 

@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-02 (ninth session)" rows: the light
+# buffer (raytrace/light_buffer.py: each directional light's map of the opaque triangles'
+# shadows, the shadow rays' any-hit query without a BVH walk) against none. Usage:
+#   bench/h200_session9.sh OUTDIR PART
+# PART lb: the device tests of the light buffer and the shadow rays, then issue 9's baseline
+#   scene per depth (--no-overlap) and whole frames at 1920x1080, and the pool (a floating boat:
+#   the map rebuilt from the live transform rows each frame) at 1920x1080, --light-buffer 1024
+#   and 0 in turns, twice;
+# PART size: the baseline scene at 3840x2160 with 1024 and 0, and at 1920x1080 with maps of 512
+#   and 2048 cells (whole frames and per depth).
+# The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+set -uo pipefail
+out=${1:?OUTDIR}
+part=${2:?PART}
+mkdir -p "$out"
+source "$(dirname "$0")/h200_lib.sh"
+case $part in
+lb)
+    timeout 300 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_light_buffer.py \
+        tests/raytrace/test_render_shadow.py 2>&1 | tail -3
+    g="$f $static --per-depth --no-overlap"
+    for rep in 1 2; do
+        for c in 1024 0; do
+            lb bench frame $g --light-buffer $c --out "$out/static_pd_lb${c}_$rep" | tail -1
+            lb bench frame $f $static --light-buffer $c --out "$out/static_lb${c}_$rep" | tail -1
+            lb bench frame $f --light-buffer $c --out "$out/pool_lb${c}_$rep" | tail -1
+        done
+    done
+    ;;
+size)
+    for c in 1024 0; do
+        lb bench frame $k $static --light-buffer $c --out "$out/static4k_lb$c" | tail -1
+    done
+    for c in 512 2048; do
+        lb bench frame $f $static --light-buffer $c --out "$out/static_lb$c" | tail -1
+        lb bench frame $f $static --per-depth --no-overlap --light-buffer $c \
+            --out "$out/static_pd_lb$c" | tail -1
+    done
+    ;;
+*)
+    echo "unknown PART $part" >&2
+    exit 2
+    ;;
+esac
