@@ -41,11 +41,13 @@ def scene_variant(scene, boat: str, old_y: float):
     return dataclasses.replace(scene, boats=scene.boats[1:], meshes=(*scene.meshes, mesh))
 
 
-def measure(rt, scene, *, cells, size, caustics, settle, frames=1) -> dict:
-    """Counters of ``frames`` frames after ``settle`` seconds of water, per ray kind."""
+def measure(rt, scene, *, cells, size, caustics, settle, frames=1, light_buffer=0) -> dict:
+    """Counters of ``frames`` frames after ``settle`` seconds of water, per ray kind (a shadow
+    ray that the light buffer answers walks nothing and is not counted)."""
     from app.world import World
 
-    world = World(scene, rt, width=size[0], height=size[1], cells=cells, caustics=caustics)
+    world = World(scene, rt, width=size[0], height=size[1], cells=cells, caustics=caustics,
+                  light_buffer=light_buffer)
     if settle > 0:
         world.frame(settle)
     sc = world.render_scene.scene
@@ -79,6 +81,9 @@ def main(argv=None) -> int:
     p.add_argument("--settle", type=float, default=0.5, help="seconds of water before counting")
     p.add_argument("--old-y", type=float, default=0.44, help="static-old keel height (m)")
     p.add_argument("--layout", default="binary", choices=["binary", "wide"])
+    p.add_argument("--light-buffer", type=int, default=0, metavar="CELLS",
+                   help="each directional light's map of what blocks it (RenderSettings."
+                        "light_buffer): the shadow rays it answers walk nothing; default 0: none")
     p.add_argument("--json", help="write the numbers here")
     args = p.parse_args(argv)
 
@@ -95,7 +100,7 @@ def main(argv=None) -> int:
         for caustics in args.caustics:
             scene = scene_variant(base, boat, args.old_y)
             r = measure(rt, scene, cells=args.cells, size=args.size, caustics=caustics,
-                        settle=args.settle)
+                        settle=args.settle, light_buffer=args.light_buffer)
             r.update(boat=boat, caustics=caustics)
             results.append(r)
             print(f"-- boat {boat}, caustics {caustics}: rays per depth {r['rays_per_depth']}; "

@@ -8,8 +8,8 @@
  *                        the margin) touches, raising the cell's depth bound to the most the
  *                        triangle's plane reaches over the cell (or its nearest vertex); a
  *                        triangle over more than LB_SMALL_CELLS cells is left to
- *   light_buffer_raster_big  a work-group per such triangle (the pool's floor and walls), its
- *                        work-items over its cells
+ *   light_buffer_raster_big  such triangles (the pool's floor and walls) one after the other,
+ *                        each one's cells spread over the whole launch
  * The order in which triangles land in a cell's slots varies; what a query answers does not. */
 #include "common.h"
 #include "transform.h"
@@ -130,20 +130,21 @@ __kernel void light_buffer_raster(__global const LightBuffer* restrict lb_maps, 
     }
 }
 
-__kernel __attribute__((reqd_work_group_size(LB_RASTER_WG, 1, 1))) void light_buffer_raster_big(
-    __global const LightBuffer* restrict lb_maps, const uint light,
-    __global const float4* restrict lb_tris, __global const Transform* restrict xforms,
-    __global int2* restrict lb_cells, __global int* restrict lb_slots,
-    __global const uint* restrict lb_big)
+__kernel void light_buffer_raster_big(__global const LightBuffer* restrict lb_maps,
+                                      const uint light, __global const float4* restrict lb_tris,
+                                      __global const Transform* restrict xforms,
+                                      __global int2* restrict lb_cells,
+                                      __global int* restrict lb_slots,
+                                      __global const uint* restrict lb_big)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
     const uint n_big = (uint)lb_cells[m.big_cell].x;
-    for (uint b = get_group_id(0); b < n_big; b += get_num_groups(0)) {   /* uniform */
+    for (uint b = 0; b < n_big; ++b) {   /* each big triangle's cells over the whole launch */
         const uint t = lb_big[b];
         /* light_buffer_raster counted its reach off the map */
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, false);
-        for (int k = get_local_id(0); k < o.n; k += LB_RASTER_WG)
+        for (int k = get_global_id(0); k < o.n; k += get_global_size(0))
             lb_insert(&m, &o, t, k, cells, lb_slots);
     }
 }

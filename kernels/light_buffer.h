@@ -14,10 +14,8 @@
 
 /* triangles a cell lists; a cell with more says "unknown" */
 #define LB_SLOTS 8
-/* a triangle over more cells is rastered by a work-group (light_buffer_raster_big) */
+/* a triangle over more cells is rastered by a whole launch (light_buffer_raster_big) */
 #define LB_SMALL_CELLS 32
-/* work-items per triangle there */
-#define LB_RASTER_WG 64
 /* light_buffer_blocked's answers */
 #define LB_UNKNOWN (-1)
 #define LB_CLEAR 0

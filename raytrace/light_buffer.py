@@ -29,7 +29,6 @@ LIGHT_BUFFER = np.dtype([("u", _F4), ("v", _F4), ("toward", _F4), ("n_u", np.int
                          ("big_cell", np.int32), ("margin", np.float32),
                          ("depth_slack", np.float32), ("pad", np.float32)])
 LB_SLOTS = 8            #: kernels/light_buffer.h
-LB_RASTER_WG = 64       #: kernels/light_buffer.h
 #: Most cells along a map's side.
 MAX_CELLS = 8192
 #: Most triangles listed: past it the per-frame raster would cost more than the walks it saves.
@@ -59,8 +58,8 @@ class LightBuffer:
         self._raster = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster", stage=stage)
         self._raster_big = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster_big",
                                               stage=stage)
-        # the big triangles' work-groups: a few per compute unit (they stride over the list)
-        self._big_groups = 4 * rt.device.max_compute_units
+        # the big triangles' launch: a few work-groups per compute unit share each one's cells
+        self._big_items = 4 * 256 * rt.device.max_compute_units
 
     def _alloc(self, tris: np.ndarray, n_cells: int) -> None:
         rt = self.rt
@@ -202,7 +201,7 @@ class LightBuffer:
             self._raster.bind(light=int(light))
             self._raster.launch(-(-items // 64) * 64, 64)
             self._raster_big.bind(light=int(light))
-            self._raster_big.launch(self._big_groups * LB_RASTER_WG, LB_RASTER_WG)
+            self._raster_big.launch(self._big_items, 256)
 
     def read(self, light: int) -> dict:
         """Light ``light``'s map as host arrays (synchronises; tests and studies): ``count``
