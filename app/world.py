@@ -616,6 +616,7 @@ class World:
             w = self.water
             self.sim.write_surface_heights(eta, w.vertices, w.normals, w.origin)
         self.rt.keep(cl.enqueue_copy(q, rs.transform_buffer, rows, is_blocking=False))
+        rs.scene.rows_written()
         self.set_camera(*s.camera)
         if s.caustics != self.caustics:
             self.set_caustics(s.caustics)
@@ -806,6 +807,8 @@ class _Water:
             w.sim.step(steps)
         else:
             w.sim.copy_guard_to_snapshot()
+        if w.boats is not None:   # their step and moves write their transform rows
+            w.render_scene.scene.rows_written()
         w.sim.guard_snapshot = None   # checks outside frames leave the copies alone
         if steps or frame.drops or frame.pushes:
             w.sim.write_surface(w.water.vertices, w.water.normals, w.water.origin)

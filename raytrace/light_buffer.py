@@ -53,6 +53,9 @@ class LightBuffer:
         self.n_cells = 0
         self.reason = "not planned"    #: why no light has a map ("" when one has)
         self._key = None
+        self._generation = 0           # plans made (each replaces the buffers)
+        self._built = None             # (rows_version, generation) of the last build
+        self.builds = 0                #: builds enqueued
         self._alloc(np.zeros((1, 4), np.float32), 1)
         self._clear = rt.kernel_launcher("light_buffer.cl", "light_buffer_clear", stage=stage)
         self._raster = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster", stage=stage)
@@ -92,6 +95,7 @@ class LightBuffer:
         if key == self._key:
             return False
         self._key = key
+        self._generation += 1
         self.maps = np.zeros(MAX_LIGHTS, LIGHT_BUFFER)
         tris, self.reason = self._triangles(render_scene, masks, int(any_hit_mask))
         lights = render_scene.lights
@@ -184,14 +188,21 @@ class LightBuffer:
         return n_cells + n_u * n_v + 2
 
     # -- per frame -------------------------------------------------------------------------
-    def enqueue(self, transform_buffer: cl.Buffer) -> None:
-        """Clear and fill every map from the instances' live transform rows (enqueued)."""
+    def enqueue(self, transform_buffer: cl.Buffer, rows_version: int | None = None) -> bool:
+        """Clear and fill every map from the instances' live transform rows (enqueued), unless
+        they are the rows of the last build (``rows_version``: raytrace.scene.Scene's count of
+        writes; None: build). Returns whether it built."""
         if not self.active:
-            return
+            return False
+        key = (rows_version, self._generation)
+        if rows_version is not None and key == self._built:
+            return False
+        self._built = key
+        self.builds += 1
         self._clear.bind(lb_cells=self.cells_buf, n_cells=self.n_cells)
         self._clear.launch(self.n_cells, 256)
         if self.n_tris == 0:
-            return
+            return True
         bufs = {"lb_maps": self.maps_buf, "lb_tris": self.tris_buf, "xforms": transform_buffer,
                 "lb_cells": self.cells_buf, "lb_slots": self.slots_buf, "lb_big": self.big_buf}
         self._raster.bind(**bufs, n_tris=self.n_tris)
@@ -202,6 +213,7 @@ class LightBuffer:
             self._raster.launch(-(-items // 64) * 64, 64)
             self._raster_big.bind(light=int(light))
             self._raster_big.launch(self._big_items, 256)
+        return True
 
     def read(self, light: int) -> dict:
         """Light ``light``'s map as host arrays (synchronises; tests and studies): ``count``

@@ -678,7 +678,7 @@ class Renderer:
         self.light_buffer.plan(self.scene, self.any_hit_mask)
         self._bind(deepest)
         self._bind_caustics()
-        self.light_buffer.enqueue(self.scene.transform_buffer)
+        self.light_buffer.enqueue(self.scene.transform_buffer, self.scene.scene.rows_version)
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
         sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
         # levels of few rays by the last counts: their trace and shadow rays one per work-group,

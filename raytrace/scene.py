@@ -110,8 +110,9 @@ class Scene:
     Instance transforms live once, on the device, in :attr:`transform_buffer` (one
     ``Transform`` row per instance, :meth:`transform_row`): the host writes a row when
     :meth:`set_transform` changes it; a device stage may write rows itself (floating bodies),
-    with no host copy. Every :meth:`update` derives the Instance records, the world boxes and
-    the normal transforms (:attr:`normal_buffer`) from the rows on the device.
+    with no host copy, and says so with :meth:`rows_written`. Every :meth:`update` derives the
+    Instance records, the world boxes and the normal transforms (:attr:`normal_buffer`) from
+    the rows on the device.
     """
 
     def __init__(self, rt: Runtime, *, leaf_size: int | None = None, layout: str | None = None,
@@ -127,6 +128,7 @@ class Scene:
         self._xforms = np.zeros((0, 3, 4), np.float32)  # the rows the host last wrote
         self.transform_buffer = rt.buffer(TRANSFORM_DTYPE.itemsize)
         self._xform_capacity = 0
+        self.rows_version = 0          # bumped by every write of the rows (rows_written)
         self._storage_tris = -1        # triangle count the shared storage was made for
         self._tlas_n = -1              # instance count the TLAS scratch was made for
         self.trace_stats = rt.buffer(4 * TRACE_STATS_LEN)
@@ -269,9 +271,18 @@ class Scene:
                 rt.queue, new, self.transform_buffer,
                 byte_count=TRANSFORM_DTYPE.itemsize * self._xform_capacity))
         self.transform_buffer, self._xform_capacity = new, capacity
+        self.rows_version += 1
         self._tlas_n = -1  # tlas_prep reads the new buffer
 
+    def rows_written(self) -> None:
+        """Say that rows of :attr:`transform_buffer` were (or are queued to be) written other
+        than by :meth:`set_transform` (a device stage moving bodies, a restored snapshot):
+        what is derived from them on demand (a renderer's light buffer) is made again.
+        :attr:`rows_version` counts these and the host's own writes."""
+        self.rows_version += 1
+
     def _write_row(self, i: int, rows: np.ndarray) -> None:
+        self.rows_version += 1
         # non-blocking: pyopencl keeps the host array alive until the copy is done
         rt = self.rt
         rt.record(f"{self.stage}.transform", cl.enqueue_copy(

@@ -309,6 +309,7 @@ def test_a_floating_boat_moved_on_the_device_is_followed(rt):
     frames, poses = {}, {}
     for cells in (0, 64):
         w = World("scenes/pool.toml", rt, width=64, height=36, cells=40, light_buffer=cells)
+        builds = w.renderer.light_buffer.builds
         frames[cells] = [w.frame(1 / 30)]
         first = w.boat_poses()[0]
         frames[cells] += [w.frame(1 / 30) for _ in range(2)]
@@ -317,6 +318,7 @@ def test_a_floating_boat_moved_on_the_device_is_followed(rt):
         if cells:
             assert w.renderer.light_buffer.active
             assert w.renderer.light_buffer.read(0)["count"].max() > 0
+            assert w.renderer.light_buffer.builds == builds + 3   # every frame: it moves
     for a, b in zip(frames[0], frames[64], strict=True):
         assert np.array_equal(a, b)
     assert np.array_equal(poses[0], poses[64])
@@ -324,3 +326,26 @@ def test_a_floating_boat_moved_on_the_device_is_followed(rt):
     with pytest.raises(InputError, match=r"light_buffer -1 out of range; allowed None or an "
                                          r"integer in \[0, 8192\]"):
         World("scenes/pool.toml", rt, light_buffer=-1)
+
+
+def test_a_still_scene_builds_its_map_once(rt):
+    """Built again only when the rows were written: by the host (set_transform) here."""
+    from app.world import World
+
+    w = World("bench/scenes/pool_static_boat.toml", rt, width=48, height=27, cells=32,
+              light_buffer=64)
+    lb = w.renderer.light_buffer
+    first = [w.frame(1 / 30) for _ in range(3)]
+    assert lb.builds == 1
+    boat = next(i for i, name in w.instances.items() if "sailboat" in name)
+    rows = w.render_scene.scene.read_host_transforms()[boat]
+    rows[:, 3] += (0.3, 0.0, -0.2)
+    w.render_scene.set_transform(boat, np.vstack([rows, [0, 0, 0, 1]]))
+    moved = w.frame(1 / 30)
+    assert lb.builds == 2
+    ref = World("bench/scenes/pool_static_boat.toml", rt, width=48, height=27, cells=32,
+                light_buffer=0)
+    want = [ref.frame(1 / 30) for _ in range(3)]
+    ref.render_scene.set_transform(boat, np.vstack([rows, [0, 0, 0, 1]]))
+    assert all(np.array_equal(a, b) for a, b in zip(first, want, strict=True))
+    assert np.array_equal(moved, ref.frame(1 / 30))
