@@ -1,24 +1,28 @@
 /* Light-buffer stage (light_buffer.h): the opaque triangles' shadows, cell by cell, for each
  * directional light with a map. Launch order per frame (raytrace/light_buffer.py,
  * LightBuffer.enqueue), no host sync:
- *   light_buffer_clear   every map's cells: no triangle, depth bound -inf
+ *   light_buffer_clear   every map's cells: no triangle, depth bound -inf; the counters after
+ *                        them (LightBuffer.outside_cell, big_cell): 0
  *   light_buffer_raster  per map: a work-item per triangle moves it to world space by its
  *                        instance's transform row (as the TLAS build and the shader do), projects
  *                        it across the light and lists it in every cell its footprint (grown by
  *                        the margin) touches, raising the cell's depth bound to the most the
  *                        triangle's plane reaches over the cell (or its nearest vertex); a
  *                        triangle over more than LB_SMALL_CELLS cells is left to
- *   light_buffer_raster_big  such triangles (the pool's floor and walls) one after the other,
- *                        each one's cells spread over the whole launch
+ *   light_buffer_raster_big  a work-group per such triangle (a boat's sail), or the whole
+ *                        launch, one after the other, for those over LB_MEDIUM_CELLS (the pool's
+ *                        floor and walls)
  * The order in which triangles land in a cell's slots varies; what a query answers does not. */
 #include "common.h"
 #include "transform.h"
 #include "light_buffer.h"
 
-__kernel void light_buffer_clear(__global int2* restrict lb_cells, const uint n_cells)
+__kernel void light_buffer_clear(__global int2* restrict lb_cells, const uint n_cells,
+                                 const uint n_map_cells)
 {
     const int2 empty = (int2)(0, float_to_ordered(-INFINITY));
-    for (uint i = get_global_id(0); i < n_cells; i += get_global_size(0)) lb_cells[i] = empty;
+    for (uint i = get_global_id(0); i < n_cells; i += get_global_size(0))
+        lb_cells[i] = i < n_map_cells ? empty : (int2)(0);   /* after the maps: counters */
 }
 
 inline float3 lb_world(const Transform m, float3 p)   /* render_surface.h's xform_point */
@@ -122,29 +126,38 @@ __kernel void light_buffer_raster(__global const LightBuffer* restrict lb_maps, 
     __global int* cells = (__global int*)lb_cells;
     for (uint t = get_global_id(0); t < n_tris; t += get_global_size(0)) {
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, true);
-        if (o.n > LB_SMALL_CELLS) {
+        if (o.n > LB_MEDIUM_CELLS)   /* huge: from the list's back */
+            lb_big[n_tris - 1u - atomic_inc(cells + 2 * m.big_cell + 1)] = t;
+        else if (o.n > LB_SMALL_CELLS)   /* medium: from its front */
             lb_big[atomic_inc(cells + 2 * m.big_cell)] = t;
-            continue;
-        }
-        for (int k = 0; k < o.n; ++k) lb_insert(&m, &o, t, k, cells, lb_slots);
+        else
+            for (int k = 0; k < o.n; ++k) lb_insert(&m, &o, t, k, cells, lb_slots);
     }
 }
 
+/* The triangles light_buffer_raster left: the huge ones one after the other, each one's cells
+ * spread over the whole launch, then the medium ones a work-group each. */
 __kernel void light_buffer_raster_big(__global const LightBuffer* restrict lb_maps,
                                       const uint light, __global const float4* restrict lb_tris,
-                                      __global const Transform* restrict xforms,
+                                      const uint n_tris, __global const Transform* restrict xforms,
                                       __global int2* restrict lb_cells,
                                       __global int* restrict lb_slots,
                                       __global const uint* restrict lb_big)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
-    const uint n_big = (uint)lb_cells[m.big_cell].x;
-    for (uint b = 0; b < n_big; ++b) {   /* each big triangle's cells over the whole launch */
-        const uint t = lb_big[b];
-        /* light_buffer_raster counted its reach off the map */
+    const int2 n_big = lb_cells[m.big_cell];   /* x: medium, y: huge */
+    /* light_buffer_raster counted their reach off the map */
+    for (int b = 0; b < n_big.y; ++b) {
+        const uint t = lb_big[n_tris - 1u - (uint)b];
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, false);
         for (int k = get_global_id(0); k < o.n; k += get_global_size(0))
+            lb_insert(&m, &o, t, k, cells, lb_slots);
+    }
+    for (int b = get_group_id(0); b < n_big.x; b += get_num_groups(0)) {   /* uniform */
+        const uint t = lb_big[b];
+        const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, false);
+        for (int k = get_local_id(0); k < o.n; k += get_local_size(0))
             lb_insert(&m, &o, t, k, cells, lb_slots);
     }
 }

@@ -14,8 +14,10 @@
 
 /* triangles a cell lists; a cell with more says "unknown" */
 #define LB_SLOTS 8
-/* a triangle over more cells is rastered by a whole launch (light_buffer_raster_big) */
+/* a triangle over more cells is rastered by a work-group (light_buffer_raster_big) */
 #define LB_SMALL_CELLS 32
+/* one over more cells by the whole launch */
+#define LB_MEDIUM_CELLS 4096
 /* light_buffer_blocked's answers */
 #define LB_UNKNOWN (-1)
 #define LB_CLEAR 0
@@ -31,7 +33,8 @@ typedef struct {
     int n_u, n_v;      /* cells along u and v */
     int cell_base;     /* the map's first cell in lb_cells (its slots: LB_SLOTS per cell) */
     int outside_cell;  /* lb_cells[outside_cell].x: triangles that reach off the map */
-    int big_cell;      /* lb_cells[big_cell].x: triangles left to light_buffer_raster_big */
+    int big_cell;      /* lb_cells[big_cell]: triangles left to light_buffer_raster_big (x:
+                          medium, y: huge; light_buffer.cl) */
     float margin;      /* cells a triangle's footprint grows by: rounding of the projections */
     float depth_slack; /* metres a cell's depth bound grows by: rounding of the depths */
     float pad;

@@ -50,17 +50,20 @@ class LightBuffer:
         self.rt, self.cells, self.stage = rt, cells, stage
         self.maps = np.zeros(MAX_LIGHTS, LIGHT_BUFFER)
         self.n_tris = 0
-        self.n_cells = 0
+        self.n_cells = 0               #: cells of every map, then two counters per map
+        self.n_map_cells = 0           #: cells of every map
         self.reason = "not planned"    #: why no light has a map ("" when one has)
         self._key = None
         self._generation = 0           # plans made (each replaces the buffers)
         self._built = None             # (rows_version, generation) of the last build
         self.builds = 0                #: builds enqueued
         self._alloc(np.zeros((1, 4), np.float32), 1)
-        self._clear = rt.kernel_launcher("light_buffer.cl", "light_buffer_clear", stage=stage)
-        self._raster = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster", stage=stage)
+        self._clear = rt.kernel_launcher("light_buffer.cl", "light_buffer_clear",
+                                         stage=f"{stage}.clear")
+        self._raster = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster",
+                                          stage=f"{stage}.raster")
         self._raster_big = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster_big",
-                                              stage=stage)
+                                              stage=f"{stage}.big")
         # the big triangles' launch: a few work-groups per compute unit share each one's cells
         self._big_items = 4 * 256 * rt.device.max_compute_units
 
@@ -108,6 +111,11 @@ class LightBuffer:
             world = self._world_points(render_scene, masks, int(any_hit_mask))
             for i in directional:
                 n_cells = self._plan_map(i, -lights[i]["direction"][:3], world, n_cells)
+            self.n_map_cells = n_cells
+            for k, i in enumerate(directional):   # their counters after every map's cells
+                self.maps[i]["outside_cell"] = n_cells + 2 * k
+                self.maps[i]["big_cell"] = n_cells + 2 * k + 1
+            n_cells += 2 * len(directional)
         self.n_tris = 0 if self.reason else len(tris) // 3
         self.n_cells = n_cells
         self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells)
@@ -155,7 +163,7 @@ class LightBuffer:
 
     def _plan_map(self, light: int, toward, world: np.ndarray, n_cells: int) -> int:
         """Map ``light`` across the unit direction ``toward`` over the footprint of ``world``
-        (padded by DOMAIN_PAD); returns the cells used so far."""
+        (padded by DOMAIN_PAD), its cells from ``n_cells``; returns the cells used so far."""
         m = self.maps[light]
         t32 = np.asarray(toward, np.float32)
         t = t32.astype(np.float64)
@@ -179,13 +187,11 @@ class LightBuffer:
         m["v"] = (*(ev / size), -lo[1] / size)
         m["toward"][:3] = t32
         m["n_u"], m["n_v"], m["cell_base"] = n_u, n_v, n_cells
-        m["outside_cell"] = n_cells + n_u * n_v
-        m["big_cell"] = n_cells + n_u * n_v + 1
         # float32 rounding of the projections and depths: ~1e-6 of the coordinates, grown 10x
         scale = reach + float((hi - lo).max())
         m["margin"] = 1.0 / 64 + 1e-5 * scale / size
         m["depth_slack"] = 1e-5 * scale
-        return n_cells + n_u * n_v + 2
+        return n_cells + n_u * n_v
 
     # -- per frame -------------------------------------------------------------------------
     def enqueue(self, transform_buffer: cl.Buffer, rows_version: int | None = None) -> bool:
@@ -199,14 +205,15 @@ class LightBuffer:
             return False
         self._built = key
         self.builds += 1
-        self._clear.bind(lb_cells=self.cells_buf, n_cells=self.n_cells)
+        self._clear.bind(lb_cells=self.cells_buf, n_cells=self.n_cells,
+                         n_map_cells=self.n_map_cells)
         self._clear.launch(self.n_cells, 256)
         if self.n_tris == 0:
             return True
         bufs = {"lb_maps": self.maps_buf, "lb_tris": self.tris_buf, "xforms": transform_buffer,
                 "lb_cells": self.cells_buf, "lb_slots": self.slots_buf, "lb_big": self.big_buf}
         self._raster.bind(**bufs, n_tris=self.n_tris)
-        self._raster_big.bind(**bufs)
+        self._raster_big.bind(**bufs, n_tris=self.n_tris)
         items = min(self.n_tris, _MAX_ITEMS)
         for light in np.flatnonzero(self.maps["n_u"] > 0):
             self._raster.bind(light=int(light))
@@ -223,13 +230,14 @@ class LightBuffer:
             raise ValueError(f"light {light} has no map ({self.reason or 'not directional'})")
         n = int(m["n_u"] * m["n_v"])
         base = int(m["cell_base"])
-        cells = self.rt.to_host(self.cells_buf, np.int32, 2 * (n + 2), 2 * base).reshape(-1, 2)
+        cells = self.rt.to_host(self.cells_buf, np.int32, 2 * n, 2 * base).reshape(-1, 2)
+        counters = self.rt.to_host(self.cells_buf, np.int32, 4, 2 * int(m["outside_cell"]))
         slots = self.rt.to_host(self.slots_buf, np.int32, LB_SLOTS * n, LB_SLOTS * base)
         shape = (int(m["n_v"]), int(m["n_u"]))
         return {"count": cells[:n, 0].reshape(shape),
                 "depth": ordered_to_float(cells[:n, 1]).reshape(shape),
-                "slots": slots.reshape(*shape, LB_SLOTS), "outside": int(cells[n, 0]),
-                "big": int(cells[n + 1, 0])}
+                "slots": slots.reshape(*shape, LB_SLOTS), "outside": int(counters[0]),
+                "big": int(counters[2] + counters[3])}
 
 
 def ordered_to_float(i: np.ndarray) -> np.ndarray:
