@@ -8,7 +8,7 @@
 #   the map rebuilt from the live transform rows each frame) at 1920x1080, --light-buffer 1024
 #   and 0 in turns, twice;
 # PART size: the baseline scene at 3840x2160 with 1024 and 0, and at 1920x1080 with maps of 512
-#   and 2048 cells (whole frames and per depth).
+#   and 2048 cells (whole frames and per depth); the pool per depth with 1024 and 0.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -36,6 +36,10 @@ size)
         lb bench frame $f $static --light-buffer $c --out "$out/static_lb$c" | tail -1
         lb bench frame $f $static --per-depth --no-overlap --light-buffer $c \
             --out "$out/static_pd_lb$c" | tail -1
+    done
+    for c in 1024 0; do
+        lb bench frame $f --per-depth --no-overlap --light-buffer $c --out "$out/pool_pd_lb$c" \
+            | tail -1
     done
     ;;
 *)
