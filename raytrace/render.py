@@ -236,8 +236,9 @@ GPU_LIGHT_BUFFER = 1024
 
 def device_light_buffer(rt: Runtime) -> int:
     """``light_buffer`` on ``rt``'s device: :data:`GPU_LIGHT_BUFFER` cells on a GPU; none on a
-    CPU, whose wide-BVH any-hit query costs about what the map's per-frame raster does (PoCL,
-    2 cores, the baseline scene at 480x270: 0.11 s a frame either way)."""
+    CPU, where the map's build every frame costs what a floating boat's scene gains (PoCL, 2
+    cores, 480x270: the pool 180.6 against 178.1 ms a frame with 256 cells; a still scene 104.9
+    against 108.8: BENCHMARKS.md, ninth session)."""
     return GPU_LIGHT_BUFFER if rt.is_gpu else 0
 
 
