@@ -64,19 +64,24 @@ class RayQuery:
 
     def __init__(self, scene: Scene, org: cl.Buffer, dirs: cl.Buffer, hits: cl.Buffer, n: int,
                  *, any_hit: bool = False, stage: str = "trace", defines: dict | None = None,
-                 mask: int = MASK_ALL, coop: bool = False):
+                 mask: int = MASK_ALL, coop: bool = False, only: int = -1):
         """``defines``: extra build defines of ``trace_query.cl`` (e.g. ``{"TRACE_CPU": 0}``
         to time the GPU flavour of the traversal on a CPU; see kernels/traverse.h). ``mask``:
         the rays see the instances whose visibility mask shares a bit with it
         (Scene.set_instance_mask). ``coop``: one ray per work-group of 32 tracing it together
-        (kernels/traverse_coop.h; binary layout, else each work-item alone)."""
+        (kernels/traverse_coop.h; binary layout, else each work-item alone). ``only`` >= 0:
+        that instance alone, with no TLAS walk (its BLAS, or its height-field walk; the caller
+        knows it is the one ``mask`` can match)."""
         self.rt, self.n, self.stage, self.coop = scene.rt, int(n), stage, bool(coop)
         name = ("trace_any" if any_hit else "trace_closest") + ("_coop" if coop else "")
         defines = {**scene.trace_defines, **({"TRACE_COOP": 1} if coop else {}),
                    **(defines or {})}
         self._k = scene.rt.kernel_launcher("trace_query.cl", name, stage=stage, defines=defines)
+        if not -1 <= int(only) < scene.n_instances:
+            raise ValueError(f"only must be -1 or an instance id below {scene.n_instances}, "
+                             f"got {only}")
         self._k.bind(**scene.trace_bindings(), n=self.n, org=org, dir=dirs, hits=hits,
-                     mask=int(mask))
+                     mask=int(mask), only=int(only))
         # kernel arguments hold no references: keep the buffers alive as long as the query
         self._scene, self.org, self.dirs, self.hits = scene, org, dirs, hits
 

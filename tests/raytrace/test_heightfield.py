@@ -167,6 +167,53 @@ def test_cooperative_walk_enters_the_height_field(binary_rt):
     assert hf.coop_redos() == 0
 
 
+def long_walks(v, n=600, seed=12):
+    """Rays that cross the grid nearly level (more than 32 spans of HF_BLOCK columns: two
+    rounds of the cooperative walk), from above and from inside the slab, any azimuth."""
+    rng = np.random.default_rng(seed)
+    lo, hi = v.min(0), v.max(0)
+    az = rng.uniform(0, 2 * np.pi, n)
+    c = 0.5 * (lo + hi)
+    r = 0.505 * (hi[0] - lo[0])   # at the box's edge
+    o = np.stack([c[0] - r * np.cos(az), rng.uniform(-0.02, 0.05, n),
+                  c[2] - r * np.sin(az)], -1)
+    d = np.stack([np.cos(az), rng.uniform(-0.02, 0.004, n), np.sin(az)], -1)
+    return o, d, np.full(n, np.inf)
+
+
+def test_cooperative_walk_splits_a_long_walk(binary_rt):
+    """A 321 x 321 grid (40 blocks a side): the group's rounds of spans give the serial walk's
+    hits, the TLAS walk entering the grid and the grid alone (`only`, a shadow ray's crossings)."""
+    n = 321
+    v, tri = grid(n, 0.7)
+    hf, bvh = scenes(binary_rt, v, tri, n)
+    o, d, tmax = long_walks(v)
+    ro, rd, rt_ = ray_set(v, 600, seed=13)
+    o, d, tmax = np.concatenate([o, ro]), np.concatenate([d, rd]), np.concatenate([tmax, rt_])
+    serial = trace(hf, o, d, tmax, False)
+    assert_identical(serial, trace(bvh, o, d, tmax, False))
+    far = np.abs(np.where(serial["prim"][:600] >= 0, serial["t"][:600], 0) * d[:600, 0]) \
+        + np.abs(np.where(serial["prim"][:600] >= 0, serial["t"][:600], 0) * d[:600, 2])
+    cell = (v[:, 0].max() - v[:, 0].min()) / (n - 1)
+    # hits beyond the first round of 32 spans, and misses after every span
+    assert (far > 33 * HF_BLOCK * cell).mean() > 0.02
+    assert (serial["prim"][:600] < 0).mean() > 0.05
+    coop = trace(hf, o, d, tmax, True)
+    for field in ("t", "u", "v", "prim", "inst"):
+        assert np.array_equal(coop[field], serial[field]), field
+    alone = [trace(hf, o, d, tmax, c, only=0) for c in (False, True)]
+    for field in ("t", "u", "v", "prim", "inst"):
+        assert np.array_equal(alone[0][field], alone[1][field]), field
+    grid_hits = serial["inst"] == 0
+    assert np.array_equal(alone[1]["t"][grid_hits], serial["t"][grid_hits])
+    for c in (False, True):
+        anys = trace(hf, o, d, tmax, c, any_hit=True, only=0)
+        assert np.array_equal(anys["prim"] >= 0, alone[0]["prim"] >= 0)
+    anys = trace(hf, o, d, tmax, True, any_hit=True)
+    assert np.array_equal(anys["prim"] >= 0, serial["prim"] >= 0)
+    assert hf.coop_redos() == 0
+
+
 def test_moved_vertices_are_seen_after_update(binary_rt):
     """A dynamic grid: new heights written to its buffer, update(), the hits of a fresh BVH."""
     n = 33

@@ -60,13 +60,13 @@ def rays(n=1200, seed=5):
     return o, d, tmax
 
 
-def trace(scene, o, d, tmax, coop, any_hit=False, mask=0xFFFFFFFF, defines=None):
+def trace(scene, o, d, tmax, coop, any_hit=False, mask=0xFFFFFFFF, defines=None, only=-1):
     rt = scene.rt
     ro, rd = pack_rays(o, d, 0.0, tmax)
     n = len(ro)
     hits = rt.buffer(HIT_DTYPE.itemsize * n)
     RayQuery(scene, rt.to_device(ro), rt.to_device(rd), hits, n, any_hit=any_hit, mask=mask,
-             coop=coop, defines=defines).enqueue()
+             coop=coop, defines=defines, only=only).enqueue()
     h = rt.to_host(hits, HIT_DTYPE, n)
     scene.check()
     return h
