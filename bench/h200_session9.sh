@@ -9,9 +9,11 @@
 #   and 0 in turns, twice;
 # PART size: the baseline scene at 3840x2160 with 1024 and 0, and at 1920x1080 with maps of 512
 #   and 2048 cells (whole frames and per depth); the pool per depth with 1024 and 0.
-# PART coophf: the cooperative walk of the height field (bench/patches/coop_heightfield.patch)
-#   against the walk of one lane (the patch reversed in a copy of the tree): its device tests,
-#   then the pool and the baseline scene at 1920x1080, whole frames in turns twice and per depth.
+# PART coophf: the cooperative walk of the height field (bench/patches/coop_heightfield.patch,
+#   tried and left out) against the walk of one lane: its device tests, then the pool and the
+#   baseline scene at 1920x1080, whole frames in turns twice and per depth. Run at b79f116 and
+#   284b46e, where the patch was in the tree and the copy had it reversed; from the tree as it
+#   is now, the copy gets it applied: "coophf" and "old" name the same two walks.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -46,21 +48,23 @@ size)
     done
     ;;
 coophf)
-    timeout 400 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_heightfield.py \
-        tests/raytrace/test_trace_coop.py tests/raytrace/test_render_coop.py 2>&1 | tail -3
-    variant_tree /tmp/old
-    (cd /tmp/old && patch -p1 -s -R < "$OLDPWD/bench/patches/coop_heightfield.patch")
+    variant_tree /tmp/coop
+    (cd /tmp/coop && patch -p1 -s < "$OLDPWD/bench/patches/coop_heightfield.patch")
+    (cd /tmp/coop && PYTHONPATH=/tmp/site:/tmp/coop timeout 400 python3 -m pytest -q \
+        -p no:cacheprovider tests/raytrace/test_heightfield.py tests/raytrace/test_trace_coop.py \
+        tests/raytrace/test_render_coop.py 2>&1 | tail -3)
     for rep in 1 2; do
-        lb bench frame $f --out "$out/pool_coophf_$rep" | tail -1
-        in_tree /tmp/old bench frame $f --out "$out/pool_old_$rep" | tail -1
-        lb bench frame $f $static --out "$out/static_coophf_$rep" | tail -1
-        in_tree /tmp/old bench frame $f $static --out "$out/static_old_$rep" | tail -1
+        in_tree /tmp/coop bench frame $f --out "$out/pool_coophf_$rep" | tail -1
+        lb bench frame $f --out "$out/pool_old_$rep" | tail -1
+        in_tree /tmp/coop bench frame $f $static --out "$out/static_coophf_$rep" | tail -1
+        lb bench frame $f $static --out "$out/static_old_$rep" | tail -1
     done
-    lb bench frame $f --per-depth --no-overlap --out "$out/pool_pd_coophf" | tail -1
-    in_tree /tmp/old bench frame $f --per-depth --no-overlap --out "$out/pool_pd_old" | tail -1
-    lb bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_coophf" | tail -1
-    in_tree /tmp/old bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_old" \
+    in_tree /tmp/coop bench frame $f --per-depth --no-overlap --out "$out/pool_pd_coophf" \
         | tail -1
+    lb bench frame $f --per-depth --no-overlap --out "$out/pool_pd_old" | tail -1
+    in_tree /tmp/coop bench frame $f $static --per-depth --no-overlap \
+        --out "$out/static_pd_coophf" | tail -1
+    lb bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_old" | tail -1
     ;;
 *)
     echo "unknown PART $part" >&2

@@ -15,12 +15,8 @@
    and pushes the inner children hit, and for a leaf child each instance's BLAS root (mask
    test, object-space ray as trace_scene_walk); a BLAS node tests both child boxes with its
    instance's object-space ray and pushes the inner children hit, and tests the triangles of
-   its leaf children; the scene's height field (heightfield.h), entered by a lane, is walked
-   by the whole group at the next round's start when it is long (more than
-   TRACE_COOP_HF_MIN_SPANS spans of HF_BLOCK columns; trace_heightfield_coop: lane l takes
-   every 32nd span, a round of spans at a time, the rounds ending where a span starts past the
-   closest hit), so a grazing ray's long walk of the water is no longer one lane's chain; a
-   short one by that lane alone. The closest hit so far is shared through an atomic_min on an
+   its leaf children; the scene's height field (heightfield.h) is walked by the lane that
+   enters its instance, alone (trace_heightfield). The closest hit so far is shared through an atomic_min on an
    order-preserving integer key of t. Boxes and triangles are kept up to AND including that
    distance, so every triangle hit at the final distance is tested and the result is the hit
    of smallest (t, inst, prim): deterministic whatever the order of the lanes. Where the
@@ -55,12 +51,6 @@
 #define TRACE_COOP_SERIAL 0
 #endif
 #define TRACE_COOP_WALK (TRACE_COOP && !TRACE_WIDE && !TRACE_COUNT && !TRACE_COOP_SERIAL)
-/* a height-field walk of more spans than this goes to the whole group; a shorter one stays one
-   lane's (the group's rounds and barriers cost more than they save there: on the H200, the
-   baseline scene's tail levels' shadow rays took 0.12 against 0.10 ms all cooperative) */
-#ifndef TRACE_COOP_HF_MIN_SPANS
-#define TRACE_COOP_HF_MIN_SPANS 4
-#endif
 #define TRACE_COOP_FOUND 1 /* any-hit: a hit was found */
 #define TRACE_COOP_FULL 2  /* the stack overflowed: redo serially */
 
@@ -73,7 +63,6 @@ typedef struct {
     int top[2]; /* stack size: read from top[round & 1], pushed onto top[~round & 1] */
     int best;   /* trace_coop_key of the closest hit so far (of tmax before one) */
     int flags;  /* TRACE_COOP_FOUND | TRACE_COOP_FULL */
-    int hf_inst; /* a height-field instance a lane entered, for the group to walk; -1: none */
     float rt[TRACE_COOP_WIDTH], ru[TRACE_COOP_WIDTH], rv[TRACE_COOP_WIDTH];
     int rprim[TRACE_COOP_WIDTH], rinst[TRACE_COOP_WIDTH];
 } TraceCoop;
@@ -134,115 +123,6 @@ TRACE_INLINE float trace_coop_tri_max(float b, float tmax) {
     return b < tmax ? nextafter(b, INFINITY) : tmax;
 }
 
-/* A lane's closest hit so far, as the walk keeps it. */
-typedef struct {
-    float t, u, v;
-    int prim, inst;
-} TraceCoopHit;
-
-TRACE_INLINE void trace_coop_keep(TraceCoopHit* p, float t, float u, float v, int prim,
-                                  int inst) {
-    if (trace_coop_before(t, inst, prim, p->t, p->inst, p->prim)) {
-        p->t = t;
-        p->u = u;
-        p->v = v;
-        p->prim = prim;
-        p->inst = inst;
-    }
-}
-
-/* Height-field instance `id` walked by the whole group, every lane calling it alike after a
-   barrier that published coop->best and coop->flags: the walk's spans (traverse_heightfield.h)
-   go TRACE_COOP_WIDTH at a time, lane l taking span base + l with the group's closest hit so
-   far as its bound (ties kept), its hit kept in *p as a leaf's; a round whose first span is
-   entered past that bound, or any hit with `any`, ends it. No lane writes the scratch after
-   the last barrier it passes. */
-TRACE_INLINE void trace_heightfield_coop(SCENE_PARAMS, __local TraceCoop* coop, int id,
-                                         float3 org, float3 dir, float tmin, float tmax,
-                                         bool any, TraceCoopHit* p) {
-    float3 oo, od;
-    const TraceRay hr = trace_object_ray_od(instances + id, org, dir, &oo, &od);
-    const HfWalk w = hf_walk_setup(hf_info, &hr, oo, od, tmin, tmax);
-    const int lid = get_local_id(0);
-    for (int base = 0; base < w.n_spans; base += TRACE_COOP_WIDTH) {
-        const float sb = trace_coop_unkey(coop->best);
-        int s0, s1;
-        float t0, t1;
-        hf_span_columns(&w, base, &s0, &s1);
-        hf_span(w.u_o, w.u_d, min(s0, s1), max(s0, s1), w.ta, w.tb, &t0, &t1);
-        if (coop->flags || t0 > sb) break; /* the same values in every lane */
-        const int k = base + lid;
-        if (k < w.n_spans) {
-            float b = fmin(sb, p->t), hmax = trace_coop_tri_max(b, tmax);
-            Hit hh;
-            hh.prim = -1;
-            hh.inst = -1;
-            bool beyond;
-            if (hf_walk_span(&w, k, hf_vertices, hf_blocks, &hr, tmin, &hmax, &hh, id, any,
-                             &beyond)) {
-                trace_coop_keep(p, hh.t, hh.u, hh.v, hh.prim, id);
-                if (any) atomic_or(&coop->flags, TRACE_COOP_FOUND);
-                else atomic_min(&coop->best, trace_coop_key(hh.t));
-            }
-        }
-        barrier(CLK_LOCAL_MEM_FENCE); /* this round's hits are in */
-    }
-}
-
-/* The smallest (t, inst, prim) of the lanes' hits, found by every lane alike; ends after a
-   barrier, so the scratch may be reused at once. */
-TRACE_INLINE bool trace_coop_reduce(__local TraceCoop* coop, const TraceCoopHit* p, Hit* hit) {
-    const int lid = get_local_id(0);
-    coop->rt[lid] = p->t;
-    coop->ru[lid] = p->u;
-    coop->rv[lid] = p->v;
-    coop->rprim[lid] = p->prim;
-    coop->rinst[lid] = p->inst;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    int w = 0;
-    for (int k = 1; k < TRACE_COOP_WIDTH; ++k)
-        if (trace_coop_before(coop->rt[k], coop->rinst[k], coop->rprim[k], coop->rt[w],
-                              coop->rinst[w], coop->rprim[w]))
-            w = k;
-    bool found = coop->rprim[w] >= 0;
-    if (found) {
-        hit->t = coop->rt[w];
-        hit->u = coop->ru[w];
-        hit->v = coop->rv[w];
-        hit->prim = coop->rprim[w];
-        hit->inst = coop->rinst[w];
-    }
-    barrier(CLK_LOCAL_MEM_FENCE); /* all have read: the scratch may be reused at once */
-    return found;
-}
-
-/* Instance `only`, the scene's height field, walked by the group (trace_scene_coop's `only`:
-   a shadow ray's crossings of the water): the serial walk's hit. */
-TRACE_INLINE bool trace_heightfield_coop_only(SCENE_PARAMS, __local TraceCoop* coop, int only,
-                                              float3 org, float3 dir, float tmin, float tmax,
-                                              bool any, Hit* hit) {
-    hit->t = INFINITY;
-    hit->u = 0.0f;
-    hit->v = 0.0f;
-    hit->prim = -1;
-    hit->inst = -1;
-    if (tlas_info->root < 0 || !(tmax > tmin)
-        || (dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f) || instances[only].blas_root < 0)
-        return false; /* the same for every lane, as trace_scene_walk */
-    float3 oo, od;
-    const TraceRay hr = trace_object_ray_od(instances + only, org, dir, &oo, &od);
-    if (hf_walk_setup(hf_info, &hr, oo, od, tmin, tmax).n_spans <= TRACE_COOP_HF_MIN_SPANS)
-        return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, ~0u, only, hit, 0, 0);
-    if (get_local_id(0) == 0) {
-        coop->best = trace_coop_key(tmax);
-        coop->flags = 0;
-    }
-    barrier(CLK_LOCAL_MEM_FENCE);
-    TraceCoopHit p = {INFINITY, 0.0f, 0.0f, -1, -1};
-    trace_heightfield_coop(SCENE_ARGS, coop, only, org, dir, tmin, tmax, any, &p);
-    return trace_coop_reduce(coop, &p, hit);
-}
-
 TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, float3 org,
                                         float3 dir, float tmin, float tmax, bool any, uint mask,
                                         Hit* hit) {
@@ -264,21 +144,15 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
         coop->top[0] = 1;
         coop->best = trace_coop_key(tmax);
         coop->flags = 0;
-        coop->hf_inst = -1;
     }
-    TraceCoopHit p = {INFINITY, 0.0f, 0.0f, -1, -1}; /* this lane's closest hit */
+    /* this lane's closest hit */
+    float pt = INFINITY, pu = 0.0f, pv = 0.0f;
+    int pprim = -1, pinst = -1;
     int flags = 0;
     for (int round = 0;; ++round) {
         barrier(CLK_LOCAL_MEM_FENCE); /* last round's pushes and hits are in */
-        const int hq = coop->hf_inst;
-        if (hq >= 0 && !coop->flags) { /* a height field entered last round: walked by all */
-            trace_heightfield_coop(SCENE_ARGS, coop, hq, org, dir, tmin, tmax, any, &p);
-            barrier(CLK_LOCAL_MEM_FENCE); /* every lane has read hf_inst */
-            if (lid == 0) coop->hf_inst = -1;
-            barrier(CLK_LOCAL_MEM_FENCE);
-        }
-        const int pp = round & 1;
-        const int sp = coop->top[pp];
+        const int p = round & 1;
+        const int sp = coop->top[p];
         flags = coop->flags;
         const float sb = trace_coop_unkey(coop->best);
         if (sp == 0 || flags) break; /* the same values in every lane */
@@ -291,9 +165,9 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
             e_inst = coop->inst[k];
             e_t = coop->t[k];
         }
-        if (lid == 0) coop->top[pp ^ 1] = sp - take; /* pushes go above what is left */
+        if (lid == 0) coop->top[p ^ 1] = sp - take; /* pushes go above what is left */
         barrier(CLK_LOCAL_MEM_FENCE); /* the popped entries are read: pushes may overwrite */
-        float b = fmin(sb, p.t);
+        float b = fmin(sb, pt);
         if (!(lid < take && e_t <= b)) continue;
         TraceRay r = wr;
         if (e_inst >= 0) r = trace_object_ray(instances + e_inst, org, dir);
@@ -308,7 +182,7 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
             float te = side ? tr : tl;
             if (te == INFINITY) continue;
             if (cnt == 0) {
-                trace_coop_push(coop, pp ^ 1, first, e_inst, te);
+                trace_coop_push(coop, p ^ 1, first, e_inst, te);
             } else if (cnt > 0 && e_inst < 0) { /* TLAS leaf: enter its instances */
                 for (int k = first; k < first + cnt; ++k) {
                     int id = tlas_prims[k];
@@ -316,17 +190,12 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
                     int broot = ins->blas_root;
                     if (broot < 0 || !(ins->mask & mask)) continue;
                     if (ins->mesh != hf_mesh) {
-                        trace_coop_push(coop, pp ^ 1, broot, id, te);
+                        trace_coop_push(coop, p ^ 1, broot, id, te);
                         continue;
                     }
-                    /* the height field: a long walk goes to the whole group next round, unless
-                       another is queued (instances of one grid); else this lane walks it */
+                    /* the height field: this lane walks it alone, its hit merged as a leaf's */
                     float3 oo, od;
                     const TraceRay hr = trace_object_ray_od(ins, org, dir, &oo, &od);
-                    if (hf_walk_setup(hf_info, &hr, oo, od, tmin, trace_coop_tri_max(b, tmax))
-                                .n_spans > TRACE_COOP_HF_MIN_SPANS
-                        && atomic_cmpxchg(&coop->hf_inst, -1, id) == -1)
-                        continue;
                     Hit hh;
                     hh.prim = -1;
                     hh.inst = -1;
@@ -334,7 +203,13 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
                     if (!trace_heightfield(hf_info, hf_vertices, hf_blocks, &hr, oo, od, tmin,
                                            &hmax, &hh, id, any))
                         continue;
-                    trace_coop_keep(&p, hh.t, hh.u, hh.v, hh.prim, id);
+                    if (trace_coop_before(hh.t, id, hh.prim, pt, pinst, pprim)) {
+                        pt = hh.t;
+                        pu = hh.u;
+                        pv = hh.v;
+                        pprim = hh.prim;
+                        pinst = id;
+                    }
                     if (any) {
                         atomic_or(&coop->flags, TRACE_COOP_FOUND);
                         break;
@@ -350,7 +225,14 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
                     if (!trace_triangle(&r, tri.p0.xyz, tri.p1.xyz, tri.p2.xyz, tmin, tri_max,
                                         &t, &u, &v))
                         continue;
-                    trace_coop_keep(&p, t, u, v, as_int(tri.p0.w), e_inst);
+                    int prim = as_int(tri.p0.w);
+                    if (trace_coop_before(t, e_inst, prim, pt, pinst, pprim)) {
+                        pt = t;
+                        pu = u;
+                        pv = v;
+                        pprim = prim;
+                        pinst = e_inst;
+                    }
                     if (any) {
                         atomic_or(&coop->flags, TRACE_COOP_FOUND);
                         break;
@@ -367,7 +249,28 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
         barrier(CLK_LOCAL_MEM_FENCE); /* the scratch may be reused at once */
         return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, -1, hit, 0, 0);
     }
-    return trace_coop_reduce(coop, &p, hit);
+    /* the smallest (t, inst, prim) over the lanes, found by every lane alike */
+    coop->rt[lid] = pt;
+    coop->ru[lid] = pu;
+    coop->rv[lid] = pv;
+    coop->rprim[lid] = pprim;
+    coop->rinst[lid] = pinst;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    int w = 0;
+    for (int k = 1; k < TRACE_COOP_WIDTH; ++k)
+        if (trace_coop_before(coop->rt[k], coop->rinst[k], coop->rprim[k], coop->rt[w],
+                              coop->rinst[w], coop->rprim[w]))
+            w = k;
+    bool found = coop->rprim[w] >= 0;
+    if (found) {
+        hit->t = coop->rt[w];
+        hit->u = coop->ru[w];
+        hit->v = coop->rv[w];
+        hit->prim = coop->rprim[w];
+        hit->inst = coop->rinst[w];
+    }
+    barrier(CLK_LOCAL_MEM_FENCE); /* all have read: the scratch may be reused at once */
+    return found;
 }
 #endif
 
@@ -381,9 +284,6 @@ TRACE_INLINE bool trace_scene_coop(SCENE_PARAMS, __local TraceCoop* coop, float3
 #if TRACE_COOP_WALK
     if (only < 0)
         return trace_scene_coop_walk(SCENE_ARGS, coop, org, dir, tmin, tmax, any, mask, hit);
-    if (instances[only].mesh == hf_info->mesh)
-        return trace_heightfield_coop_only(SCENE_ARGS, coop, only, org, dir, tmin, tmax, any,
-                                           hit);
 #endif
 #if TRACE_COUNT
     if (get_local_id(0) != 0) { /* count the ray once */

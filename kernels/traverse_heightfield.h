@@ -84,110 +84,6 @@ TRACE_INLINE float2 hf_heights(float oy, float dy, float t0, float t1)
     return (float2)(fmin(y0, y1) - tol, fmax(y0, y1) + tol);
 }
 
-/* A ray's walk of the grid, prepared: its t range in the grid's box, the axes, and its
-   columns from entry to exit as spans of at most HF_BLOCK (one block's columns each). */
-typedef struct {
-    float ta, tb;          /* the ray inside the grid's box */
-    float u_o, u_d, w_o, w_d, oy, dy;   /* the ray in cell units along u and w; its heights */
-    int nx, nbx, nw, step; /* vertices along x, blocks along x, cells along w, column step */
-    int c_first, c_last;   /* the first and last column, in the ray's order */
-    int n_spans;           /* spans from c_first to c_last (0: the ray misses the box) */
-    bool ux;               /* u along x (cells i), else along z (cells j) */
-} HfWalk;
-
-TRACE_INLINE HfWalk hf_walk_setup(__global const HeightField* restrict hf, const TraceRay* r,
-                                  float3 o, float3 d, float tmin, float tmax)
-{
-    HfWalk w;
-    w.n_spans = 0;
-    /* the grid's box: entry ta and exit tb (NaN-safe as trace_box) */
-    const float3 lo = hf->lo.xyz, hi = hf->hi.xyz;
-    const int3 neg = r->idir < 0.0f;
-    const float3 tn = ((neg ? hi : lo) - r->org) * r->idir;
-    const float3 tf = ((neg ? lo : hi) - r->org) * r->idir * TRACE_BOX_GROW;
-    w.ta = TRACE_MAX(tn.x, TRACE_MAX(tn.y, TRACE_MAX(tn.z, tmin)));
-    w.tb = TRACE_MIN(tf.x, TRACE_MIN(tf.y, TRACE_MIN(tf.z, tmax)));
-    if (!(w.ta <= w.tb)) return w;
-    const int nx = hf->nx, ny = hf->ny;
-    w.nx = nx;
-    w.nbx = hf->nbx;
-    /* u along x (cells i) or along z (cells j): the axis the ray crosses more cells of */
-    w.ux = fabs(d.x * hf->cells_per_x) >= fabs(d.z * hf->cells_per_z);
-    const float cu = w.ux ? hf->cells_per_x : hf->cells_per_z;
-    const float cw = w.ux ? hf->cells_per_z : hf->cells_per_x;
-    w.u_o = ((w.ux ? o.x : o.z) - (w.ux ? hf->x0 : hf->z0)) * cu;
-    w.w_o = ((w.ux ? o.z : o.x) - (w.ux ? hf->z0 : hf->x0)) * cw;
-    w.u_d = (w.ux ? d.x : d.z) * cu;
-    w.w_d = (w.ux ? d.z : d.x) * cw;
-    w.oy = o.y;
-    w.dy = d.y;
-    const int nu = (w.ux ? nx : ny) - 1;
-    w.nw = (w.ux ? ny : nx) - 1;
-    /* the columns from entry to exit, in the ray's order */
-    const float ua = w.u_o + w.ta * w.u_d, ub = w.u_o + w.tb * w.u_d;
-    w.step = w.u_d < 0.0f ? -1 : 1;
-    w.c_first = clamp((int)floor(ua - (float)w.step * HF_EPS), 0, nu - 1);
-    w.c_last = clamp((int)floor(ub + (float)w.step * HF_EPS), 0, nu - 1);
-    if ((w.c_last - w.c_first) * w.step < 0) return w;
-    w.n_spans = (w.c_last / HF_BLOCK - w.c_first / HF_BLOCK) * w.step + 1;
-    return w;
-}
-
-/* Span k's first and last column, in the ray's order. */
-TRACE_INLINE void hf_span_columns(const HfWalk* w, int k, int* s0, int* s1)
-{
-    const int block_u = w->c_first / HF_BLOCK + k * w->step;
-    const int first = block_u * HF_BLOCK, last = first + HF_BLOCK - 1;
-    *s0 = k == 0 ? w->c_first : (w->step > 0 ? first : last);
-    const int edge = w->step > 0 ? last : first;
-    *s1 = w->step > 0 ? min(edge, w->c_last) : max(edge, w->c_last);
-}
-
-/* Span k of the walk: the triangles of its columns' cells under the ray, when the ray's heights
-   meet its blocks' y ranges; shrinks *tmax and records hits as trace_blas. *beyond: the span, or
-   a column of it, is entered past *tmax (every later span is too). */
-TRACE_INLINE bool hf_walk_span(const HfWalk* w, int k, __global const float4* restrict verts,
-                               __global const float2* restrict blocks, const TraceRay* r,
-                               float tmin, float* tmax, Hit* hit, int inst, bool any,
-                               bool* beyond)
-{
-    int s0, s1;
-    hf_span_columns(w, k, &s0, &s1);
-    const int block_u = s0 / HF_BLOCK;
-    float t0, t1;
-    hf_span(w->u_o, w->u_d, min(s0, s1), max(s0, s1), w->ta, w->tb, &t0, &t1);
-    *beyond = t0 > *tmax;
-    if (*beyond) return false;
-    int r0, r1;
-    hf_rows(w->w_o, w->w_d, t0, t1, w->nw, &r0, &r1);
-    float2 y = hf_heights(w->oy, w->dy, t0, t1);
-    bool meets = false;
-    for (int br = r0 / HF_BLOCK; br <= r1 / HF_BLOCK && !meets; ++br) {
-        const float2 by = blocks[w->ux ? br * w->nbx + block_u : block_u * w->nbx + br];
-        meets = by.y >= y.x && by.x <= y.y;
-    }
-    if (!meets) return false;
-    bool found = false;
-    for (int c = s0;; c += w->step) {
-        hf_span(w->u_o, w->u_d, c, c, w->ta, w->tb, &t0, &t1);
-        if (t0 > *tmax) {
-            *beyond = true;
-            return found;
-        }
-        hf_rows(w->w_o, w->w_d, t0, t1, w->nw, &r0, &r1);
-        y = hf_heights(w->oy, w->dy, t0, t1);
-        for (int row = r0; row <= r1; ++row) {
-            if (hf_cell(verts, w->nx, w->ux ? c : row, w->ux ? row : c, r, tmin, tmax, hit, inst,
-                        any, y.x, y.y)) {
-                found = true;
-                if (any) return true;
-            }
-        }
-        if (c == s1) break;
-    }
-    return found;
-}
-
 /* Closest (or, with any, some) hit of the grid, same contract as trace_blas: shrinks *tmax to
    each closer hit and records it in *hit. r: the object-space ray prepared for the triangle
    test; o, d: its origin and direction. */
@@ -197,15 +93,65 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
                                     float3 o, float3 d, float tmin, float* tmax, Hit* hit, int inst,
                                     bool any)
 {
-    const HfWalk w = hf_walk_setup(hf, r, o, d, tmin, *tmax);
+    /* the grid's box: entry ta and exit tb (NaN-safe as trace_box) */
+    const float3 lo = hf->lo.xyz, hi = hf->hi.xyz;
+    const int3 neg = r->idir < 0.0f;
+    const float3 tn = ((neg ? hi : lo) - r->org) * r->idir;
+    const float3 tf = ((neg ? lo : hi) - r->org) * r->idir * TRACE_BOX_GROW;
+    const float ta = TRACE_MAX(tn.x, TRACE_MAX(tn.y, TRACE_MAX(tn.z, tmin)));
+    const float tb = TRACE_MIN(tf.x, TRACE_MIN(tf.y, TRACE_MIN(tf.z, *tmax)));
+    if (!(ta <= tb)) return false;
+    const int nx = hf->nx, ny = hf->ny, nbx = hf->nbx;
+    /* u along x (cells i) or along z (cells j): the axis the ray crosses more cells of */
+    const bool ux = fabs(d.x * hf->cells_per_x) >= fabs(d.z * hf->cells_per_z);
+    const float cu = ux ? hf->cells_per_x : hf->cells_per_z;
+    const float cw = ux ? hf->cells_per_z : hf->cells_per_x;
+    const float u_o = ((ux ? o.x : o.z) - (ux ? hf->x0 : hf->z0)) * cu;
+    const float w_o = ((ux ? o.z : o.x) - (ux ? hf->z0 : hf->x0)) * cw;
+    const float u_d = (ux ? d.x : d.z) * cu, w_d = (ux ? d.z : d.x) * cw;
+    const int nu = (ux ? nx : ny) - 1, nw = (ux ? ny : nx) - 1;
+    /* the columns from entry to exit, in the ray's order */
+    const float ua = u_o + ta * u_d, ub = u_o + tb * u_d;
+    const int step = u_d < 0.0f ? -1 : 1;
+    const int c_first = clamp((int)floor(ua - (float)step * HF_EPS), 0, nu - 1);
+    const int c_last = clamp((int)floor(ub + (float)step * HF_EPS), 0, nu - 1);
+    if ((c_last - c_first) * step < 0) return false;
     bool found = false;
-    for (int k = 0; k < w.n_spans; ++k) {
-        bool beyond;
-        if (hf_walk_span(&w, k, verts, blocks, r, tmin, tmax, hit, inst, any, &beyond)) {
-            found = true;
-            if (any) return true;
+    /* spans of the columns of one block */
+    for (int s0 = c_first;;) {
+        const int block_u = s0 / HF_BLOCK;
+        const int edge = step > 0 ? block_u * HF_BLOCK + HF_BLOCK - 1 : block_u * HF_BLOCK;
+        const int s1 = step > 0 ? min(edge, c_last) : max(edge, c_last);
+        float t0, t1;
+        hf_span(u_o, u_d, min(s0, s1), max(s0, s1), ta, tb, &t0, &t1);
+        if (t0 > *tmax) break; /* every later column is beyond the closest hit */
+        int r0, r1;
+        hf_rows(w_o, w_d, t0, t1, nw, &r0, &r1);
+        float2 y = hf_heights(o.y, d.y, t0, t1);
+        bool meets = false;
+        for (int br = r0 / HF_BLOCK; br <= r1 / HF_BLOCK && !meets; ++br) {
+            const float2 by = blocks[ux ? br * nbx + block_u : block_u * nbx + br];
+            meets = by.y >= y.x && by.x <= y.y;
         }
-        if (beyond) break;
+        if (meets) {
+            for (int c = s0;; c += step) {
+                hf_span(u_o, u_d, c, c, ta, tb, &t0, &t1);
+                if (t0 > *tmax) return found;
+                hf_rows(w_o, w_d, t0, t1, nw, &r0, &r1);
+                y = hf_heights(o.y, d.y, t0, t1);
+                for (int row = r0; row <= r1; ++row) {
+                    const bool got = hf_cell(verts, nx, ux ? c : row, ux ? row : c, r, tmin, tmax,
+                                             hit, inst, any, y.x, y.y);
+                    if (got) {
+                        found = true;
+                        if (any) return true;
+                    }
+                }
+                if (c == s1) break;
+            }
+        }
+        if (s1 == c_last) break;
+        s0 = s1 + step;
     }
     return found;
 }

@@ -168,8 +168,8 @@ def test_cooperative_walk_enters_the_height_field(binary_rt):
 
 
 def long_walks(v, n=600, seed=12):
-    """Rays that cross the grid nearly level (more than 32 spans of HF_BLOCK columns: two
-    rounds of the cooperative walk), from above and from inside the slab, any azimuth."""
+    """Rays that cross the grid nearly level (past 32 spans of HF_BLOCK columns), from above
+    and from inside the slab, any azimuth."""
     rng = np.random.default_rng(seed)
     lo, hi = v.min(0), v.max(0)
     az = rng.uniform(0, 2 * np.pi, n)
@@ -181,9 +181,10 @@ def long_walks(v, n=600, seed=12):
     return o, d, np.full(n, np.inf)
 
 
-def test_cooperative_walk_splits_a_long_walk(binary_rt):
-    """A 321 x 321 grid (40 blocks a side): the group's rounds of spans give the serial walk's
-    hits, the TLAS walk entering the grid and the grid alone (`only`, a shadow ray's crossings)."""
+def test_long_walks_alone_and_cooperative(binary_rt):
+    """A 321 x 321 grid (40 blocks a side), rays that walk most of it: the serial walk gives the
+    BVH's hits, the cooperative walk the serial walk's, through the TLAS and of the grid alone
+    (`only`: a shadow ray's crossings)."""
     n = 321
     v, tri = grid(n, 0.7)
     hf, bvh = scenes(binary_rt, v, tri, n)
@@ -195,7 +196,7 @@ def test_cooperative_walk_splits_a_long_walk(binary_rt):
     far = np.abs(np.where(serial["prim"][:600] >= 0, serial["t"][:600], 0) * d[:600, 0]) \
         + np.abs(np.where(serial["prim"][:600] >= 0, serial["t"][:600], 0) * d[:600, 2])
     cell = (v[:, 0].max() - v[:, 0].min()) / (n - 1)
-    # hits beyond the first round of 32 spans, and misses after every span
+    # hits past 32 spans, and misses after every span
     assert (far > 33 * HF_BLOCK * cell).mean() > 0.02
     assert (serial["prim"][:600] < 0).mean() > 0.05
     coop = trace(hf, o, d, tmax, True)
