@@ -25,12 +25,6 @@ __kernel void light_buffer_clear(__global int2* restrict lb_cells, const uint n_
         lb_cells[i] = i < n_map_cells ? empty : (int2)(0);   /* after the maps: counters */
 }
 
-inline float3 lb_world(const Transform m, float3 p)   /* render_surface.h's xform_point */
-{
-    return (float3)(dot(m.r0.xyz, p) + m.r0.w, dot(m.r1.xyz, p) + m.r1.w,
-                    dot(m.r2.xyz, p) + m.r2.w);
-}
-
 /* Whether the triangle (a, b, c) in cell coordinates meets the square [lo, hi] (separating axes:
  * the square's two, the triangle's three edge normals; a degenerate triangle loses no overlap). */
 inline bool lb_overlaps(float2 a, float2 b, float2 c, float2 lo, float2 hi)
@@ -65,7 +59,8 @@ inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restri
     o.n = 0;
     const float4 q0 = lb_tris[3 * t], q1 = lb_tris[3 * t + 1], q2 = lb_tris[3 * t + 2];
     const Transform x = xforms[as_int(q0.w)];
-    const float3 p0 = lb_world(x, q0.xyz), p1 = lb_world(x, q1.xyz), p2 = lb_world(x, q2.xyz);
+    const float3 p0 = xform_point(x, q0.xyz), p1 = xform_point(x, q1.xyz),
+                 p2 = xform_point(x, q2.xyz);
     o.a = (float2)(dot(p0, m->u.xyz) + m->u.w, dot(p0, m->v.xyz) + m->v.w);
     o.b = (float2)(dot(p1, m->u.xyz) + m->u.w, dot(p1, m->v.xyz) + m->v.w);
     o.c = (float2)(dot(p2, m->u.xyz) + m->u.w, dot(p2, m->v.xyz) + m->v.w);

@@ -34,16 +34,6 @@ typedef struct {
     int material;
 } Surface;
 
-inline float3 xform_point(const Transform m, float3 p)
-{
-    return (float3)(dot(m.r0.xyz, p) + m.r0.w, dot(m.r1.xyz, p) + m.r1.w,
-                    dot(m.r2.xyz, p) + m.r2.w);
-}
-
-inline float3 xform_vector(const Transform m, float3 v)
-{
-    return (float3)(dot(m.r0.xyz, v), dot(m.r1.xyz, v), dot(m.r2.xyz, v));
-}
 
 inline Surface surface_at(RENDER_GEOM_PARAMS, int inst, int prim, float u, float v)
 {

@@ -12,4 +12,15 @@ typedef struct {
     float4 r2;
 } Transform;
 
+inline float3 xform_point(const Transform m, float3 p)
+{
+    return (float3)(dot(m.r0.xyz, p) + m.r0.w, dot(m.r1.xyz, p) + m.r1.w,
+                    dot(m.r2.xyz, p) + m.r2.w);
+}
+
+inline float3 xform_vector(const Transform m, float3 v)
+{
+    return (float3)(dot(m.r0.xyz, v), dot(m.r1.xyz, v), dot(m.r2.xyz, v));
+}
+
 #endif
