@@ -146,6 +146,7 @@ class World:
         from app.assemble import assemble, caustic_settings, check_water_accel, render_settings
         from app.scene import Scene, load_scene
         from kernels import get_runtime
+        from raytrace.light_buffer import MAX_CELLS
         from raytrace.render import (
             Renderer,
             device_coop_from,
@@ -168,10 +169,9 @@ class World:
                              "BVH")
         if not 1 <= int(frames_in_flight) <= 8:
             raise InputError(f"frames_in_flight {frames_in_flight} out of range; allowed [1, 8]")
-        from raytrace.light_buffer import MAX_CELLS
-
-        if light_buffer is not None and not (isinstance(light_buffer, int)
-                                             and 0 <= light_buffer <= MAX_CELLS):
+        if light_buffer is not None and (isinstance(light_buffer, bool)
+                                         or not isinstance(light_buffer, int)
+                                         or not 0 <= light_buffer <= MAX_CELLS):
             raise InputError(f"light_buffer {light_buffer!r} out of range; allowed None or "
                              f"an integer in [0, {MAX_CELLS}]")
         self.scene = scene

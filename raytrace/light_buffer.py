@@ -9,9 +9,11 @@ What it covers: the instances the shadow rays' any-hit query sees (the opaque on
 scene has a dielectric, else all), when each is a mesh the host holds; none otherwise (a height
 field, a mesh given as device buffers), and no spot light (their rays walk the BVH as before).
 
-Per frame (:meth:`LightBuffer.enqueue`): ``light_buffer_clear`` over every map's cells, then per
-map ``light_buffer_raster`` (a work-group per triangle, moved by its instance's live transform
-row: a boat that a device stage moves is followed with no host copy).
+Per build (:meth:`LightBuffer.enqueue`, when the transform rows were written since the last):
+``light_buffer_clear`` over every map's cells, then per map ``light_buffer_raster`` (a work-item
+per triangle, moved by its instance's live transform row: a boat that a device stage moves is
+followed with no host copy) and ``light_buffer_raster_big`` (the triangles over more than 32
+cells: a work-group each, or the whole launch for those over 4096).
 """
 
 from __future__ import annotations
@@ -33,8 +35,8 @@ LB_SLOTS = 8            #: kernels/light_buffer.h
 MAX_CELLS = 8192
 #: Most triangles listed: past it the per-frame raster would cost more than the walks it saves.
 MAX_TRIANGLES = 1 << 20
-#: Cells a map's triangles' footprint may drift past the footprint they had when it was planned
-#: (a floating boat), as a fraction of the map's extent on each side.
+#: How far a map reaches past its triangles' footprint when it was planned, as a fraction of
+#: that footprint's extent on each side (a floating boat drifts; past the map, rays walk the BVH).
 DOMAIN_PAD = 0.1
 #: Most work-items light_buffer_raster starts (they stride over the triangles).
 _MAX_ITEMS = 1 << 20
@@ -224,7 +226,8 @@ class LightBuffer:
 
     def read(self, light: int) -> dict:
         """Light ``light``'s map as host arrays (synchronises; tests and studies): ``count``
-        and ``depth`` (n_v, n_u), ``slots`` (n_v, n_u, LB_SLOTS), ``outside``."""
+        and ``depth`` (n_v, n_u), ``slots`` (n_v, n_u, LB_SLOTS), ``outside`` (triangles that
+        reached off the map) and ``big`` (those left to light_buffer_raster_big)."""
         m = self.maps[light]
         if m["n_u"] == 0:
             raise ValueError(f"light {light} has no map ({self.reason or 'not directional'})")

@@ -122,15 +122,18 @@ def test_no_module_moves_host_bytes_around_the_counted_paths():
 
 
 # ---- per frame: the image and a few scalars --------------------------------------------------
-def test_pool_frames_move_only_the_image_and_scalars(rt):
+@pytest.mark.parametrize("light_buffer", [None, 48])
+def test_pool_frames_move_only_the_image_and_scalars(rt, light_buffer):
     """20 frames of scenes/pool.toml (the floating sailboat, caustics, rain on, a drop, a moving
-    camera)."""
+    camera), with the device's light buffer (none on a CPU) and with one (built every frame
+    from the boat's device-written transform row)."""
     from app.frames import with_shading
 
     scene = with_shading(load_scene(ROOT / "scenes" / "pool.toml"),
                          {"caustics": "traced", "caustic_photons": 4096})
     assert scene.boats, "the pool floats a boat: its bodies stage runs in every frame"
-    world = World(scene, rt, width=40, height=24, cells=40, water_steps=0)
+    world = World(scene, rt, width=40, height=24, cells=40, water_steps=0,
+                  light_buffer=light_buffer)
     world.set_rain(20.0)
     world.frame(1 / 60)  # the first frame uploads tables and builds layouts
     image = 40 * 24 * 4
@@ -152,6 +155,8 @@ def test_pool_frames_move_only_the_image_and_scalars(rt):
     assert world.stats.frame == 20 and world.stats.guard["nan"] is False
     assert world.stats.stage_ms.get("lbm.bodies", 0) > 0
     assert world.stats.stage_ms.get("caustics.photons", 0) > 0
+    if light_buffer:
+        assert world.stats.stage_ms.get("render.light_buffer.raster", 0) > 0
 
 
 def test_a_frame_reads_its_image_counts_and_guard_once(tiny, rt):

@@ -21,7 +21,11 @@ SUN = (-0.45, -0.8, -0.35)
 
 
 def test_layout_matches_the_device(rt):
+    from kernels.runtime import KERNEL_DIR
+
     check_struct(rt, "light_buffer.h", "LightBuffer", LIGHT_BUFFER)
+    assert LIGHT_BUFFER.itemsize == 80
+    assert f"#define LB_SLOTS {LB_SLOTS}\n" in (KERNEL_DIR / "light_buffer.h").read_text()
 
 
 def rotation(yaw: float, pitch: float) -> np.ndarray:
