@@ -136,15 +136,33 @@ def main(argv: list[str] | None = None) -> int:
         _take_over_ctrl_c()
         return _main(parser, argv)
     except KeyboardInterrupt:
+        _quiet_teardown()
         print("lbwater: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BaseException:
         if _SIGINT_SEEN:   # an interrupt that came out as another exception
+            _quiet_teardown()
             print("lbwater: interrupted", file=sys.stderr)
             return EXIT_INTERRUPTED
         raise
     finally:
+        if sys.unraisablehook is _ignore_unraisable:
+            import gc
+
+            gc.collect()   # the half-built objects in cycles, still unreported
         sys.unraisablehook = previous
+
+
+def _ignore_unraisable(unraisable) -> None:
+    """Drops an error Python could only report (see :func:`_quiet_teardown`)."""
+
+
+def _quiet_teardown() -> None:
+    """After an interrupt, the objects it left half-built fail in their ``__del__`` as they go
+    (pytools' compiler cache cut short inside its ``__init__``: ``Exception ignored ...
+    AttributeError``); the command ends with its one line, so those reports are dropped until
+    :func:`main` returns."""
+    sys.unraisablehook = _ignore_unraisable
 
 
 def _main(parser, argv: list[str]) -> int:

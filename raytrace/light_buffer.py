@@ -60,14 +60,18 @@ class LightBuffer:
         self._built = None             # (rows_version, generation) of the last build
         self.builds = 0                #: builds enqueued
         self._alloc(np.zeros((1, 4), np.float32), 1)
-        self._clear = rt.kernel_launcher("light_buffer.cl", "light_buffer_clear",
-                                         stage=f"{stage}.clear")
-        self._raster = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster",
-                                          stage=f"{stage}.raster")
-        self._raster_big = rt.kernel_launcher("light_buffer.cl", "light_buffer_raster_big",
-                                              stage=f"{stage}.big")
+        self._kernels = None           # built with the first map (none: no program to build)
         # the big triangles' launch: a few work-groups per compute unit share each one's cells
         self._big_items = 4 * 256 * rt.device.max_compute_units
+
+    def _launchers(self) -> tuple:
+        if self._kernels is None:
+            self._kernels = tuple(
+                self.rt.kernel_launcher("light_buffer.cl", f"light_buffer_{name}",
+                                        stage=f"{self.stage}.{stage}")
+                for name, stage in (("clear", "clear"), ("raster", "raster"),
+                                    ("raster_big", "big")))
+        return self._kernels
 
     def _alloc(self, tris: np.ndarray, n_cells: int) -> None:
         rt = self.rt
@@ -207,21 +211,21 @@ class LightBuffer:
             return False
         self._built = key
         self.builds += 1
-        self._clear.bind(lb_cells=self.cells_buf, n_cells=self.n_cells,
-                         n_map_cells=self.n_map_cells)
-        self._clear.launch(self.n_cells, 256)
+        clear, raster, raster_big = self._launchers()
+        clear.bind(lb_cells=self.cells_buf, n_cells=self.n_cells, n_map_cells=self.n_map_cells)
+        clear.launch(self.n_cells, 256)
         if self.n_tris == 0:
             return True
         bufs = {"lb_maps": self.maps_buf, "lb_tris": self.tris_buf, "xforms": transform_buffer,
                 "lb_cells": self.cells_buf, "lb_slots": self.slots_buf, "lb_big": self.big_buf}
-        self._raster.bind(**bufs, n_tris=self.n_tris)
-        self._raster_big.bind(**bufs, n_tris=self.n_tris)
+        raster.bind(**bufs, n_tris=self.n_tris)
+        raster_big.bind(**bufs, n_tris=self.n_tris)
         items = min(self.n_tris, _MAX_ITEMS)
         for light in np.flatnonzero(self.maps["n_u"] > 0):
-            self._raster.bind(light=int(light))
-            self._raster.launch(-(-items // 64) * 64, 64)
-            self._raster_big.bind(light=int(light))
-            self._raster_big.launch(self._big_items, 256)
+            raster.bind(light=int(light))
+            raster.launch(-(-items // 64) * 64, 64)
+            raster_big.bind(light=int(light))
+            raster_big.launch(self._big_items, 256)
         return True
 
     def read(self, light: int) -> dict:

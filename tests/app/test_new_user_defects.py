@@ -342,3 +342,26 @@ def test_no_opencl_runtime_at_all_is_one_line(monkeypatch, capsys):
     assert main(["devices"]) == 2
     err = _one_line_error(capsys.readouterr().err, "devices")
     assert "pyopencl cannot be imported (libOpenCL.so.1" in err
+
+
+def test_an_object_an_interrupt_left_half_built_says_nothing(monkeypatch, capsys):
+    """An interrupt inside a constructor (pytools' compiler cache, cut short in its __init__)
+    leaves an object whose __del__ fails as it goes: the command still ends with one line."""
+    from app import cli
+
+    class HalfBuilt:
+        def __init__(self):
+            raise KeyboardInterrupt
+
+        def __del__(self):
+            self.mutex   # never set: AttributeError, which Python can only report
+
+    def run(parser, argv):
+        HalfBuilt()
+
+    monkeypatch.setattr(cli, "_main", run)
+    monkeypatch.setattr(sys, "unraisablehook", sys.__unraisablehook__)   # Python's: it prints
+    hook = sys.unraisablehook
+    assert cli.main(["devices"]) == 130
+    assert capsys.readouterr().err.splitlines() == ["lbwater: interrupted"]
+    assert sys.unraisablehook is hook   # put back for what runs next
