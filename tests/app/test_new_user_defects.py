@@ -354,7 +354,7 @@ def test_an_object_an_interrupt_left_half_built_says_nothing(monkeypatch, capsys
             raise KeyboardInterrupt
 
         def __del__(self):
-            self.mutex   # never set: AttributeError, which Python can only report
+            _ = self.mutex   # never set: AttributeError, which Python can only report
 
     def run(parser, argv):
         HalfBuilt()
