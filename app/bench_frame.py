@@ -132,6 +132,13 @@ def run(args) -> int:
         if not 1 <= args.photons <= 2**26:
             raise InputError(f"--photons {args.photons} is out of range; allowed [1, {2**26}]")
         scene = with_shading(scene, {"caustic_photons": args.photons})
+    light_buffer = getattr(args, "light_buffer", None)
+    if light_buffer is not None:
+        from raytrace.light_buffer import MAX_CELLS
+
+        if not 0 <= light_buffer <= MAX_CELLS:
+            raise InputError(f"--light-buffer {light_buffer} is out of range; allowed "
+                             f"[0, {MAX_CELLS}]")
     overlap_from = getattr(args, "overlap_from", None)
     if overlap_from is not None and not 0 <= overlap_from <= MAX_DEPTH:
         raise InputError(f"--overlap-from {overlap_from} is out of range; allowed [0, {MAX_DEPTH}]")
@@ -157,7 +164,7 @@ def run(args) -> int:
                       rebuild_water_bvh=args.rebuild, caustics=args.caustics,
                       water_accel=getattr(args, "water_accel", None),
                       frames_in_flight=getattr(args, "frames_in_flight", 2),
-                      light_buffer=getattr(args, "light_buffer", None))
+                      light_buffer=light_buffer)
         if getattr(args, "per_depth", False):
             world.renderer.set_stage_per_depth(True)
         world.renderer.set_overlap(not getattr(args, "no_overlap", False), overlap_from)
