@@ -5,8 +5,8 @@
  * each instance's object space, the same floats as its BLAS), the answer is the any-hit
  * traversal's, bit for bit, with no tree walked. A cell that lists more than LB_SLOTS
  * triangles, or an origin off the map while some triangle reached past it, says "unknown" and
- * the ray walks the BVH as before. Built on the device every frame from the scene's transform
- * rows (light_buffer.cl); raytrace/light_buffer.py plans it. */
+ * the ray walks the BVH as before. Built on the device from the scene's transform rows whenever
+ * they were written (light_buffer.cl); raytrace/light_buffer.py plans it. */
 #ifndef LBWATER_LIGHT_BUFFER_H
 #define LBWATER_LIGHT_BUFFER_H
 
@@ -43,8 +43,8 @@ typedef struct {
 /* The kernel parameters of a stage that reads the light buffer (shadow rays), and their names.
  * lb_cells[c]: x = triangles listed (the first LB_SLOTS in lb_slots[c * LB_SLOTS ..]),
  * y = float_to_ordered of the nearest-to-the-light depth any of them reaches over the cell;
- * lb_tris: three float4 per listed triangle, its object-space vertices,
-     p0.w = as_float(instance). */
+ * lb_tris: three float4 per listed triangle, its object-space vertices, p0.w = as_float(instance).
+ */
 #define LIGHT_BUFFER_PARAMS                                                                   \
     __global const LightBuffer* restrict lb_maps, __global const int2* restrict lb_cells,   \
         __global const int* restrict lb_slots, __global const float4* restrict lb_tris
