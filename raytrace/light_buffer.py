@@ -46,10 +46,8 @@ class LightBuffer:
     """The maps of one renderer: ``cells`` along a map's longer side (0: none)."""
 
     def __init__(self, rt: Runtime, cells: int, stage: str = "render.light_buffer"):
-        cells = int(cells)
-        if not 0 <= cells <= MAX_CELLS:
-            raise ValueError(f"light buffer cells must lie in [0, {MAX_CELLS}], got {cells}")
-        self.rt, self.cells, self.stage = rt, cells, stage
+        # checked with the settings (RenderSettings.resolved: [0, MAX_CELLS])
+        self.rt, self.cells, self.stage = rt, int(cells), stage
         self.maps = np.zeros(MAX_LIGHTS, LIGHT_BUFFER)
         self.n_tris = 0
         self.n_cells = 0               #: cells of every map, then two counters per map
@@ -114,7 +112,7 @@ class LightBuffer:
             self.reason = "no directional light"
         n_cells = 0
         if not self.reason:
-            world = self._world_points(render_scene, masks, int(any_hit_mask))
+            world = self._world_vertices(render_scene.scene, tris)
             for i in directional:
                 n_cells = self._plan_map(i, -lights[i]["direction"][:3], world, n_cells)
             self.n_map_cells = n_cells
@@ -154,18 +152,12 @@ class LightBuffer:
         return np.concatenate(out), ""
 
     @staticmethod
-    def _world_points(render_scene, masks, mask: int) -> np.ndarray:
-        """The listed instances' vertices in world space by the transforms the host wrote."""
-        sc = render_scene.scene
-        rows = sc.read_host_transforms()
-        pts = [np.zeros((0, 3))]
-        for inst, m in enumerate(masks):
-            if m & mask:
-                mesh = render_scene.meshes[int(render_scene.instances[inst]["mesh"])]
-                v = np.asarray(mesh["vertices"], np.float64)
-                r = rows[inst].astype(np.float64)
-                pts.append(v @ r[:, :3].T + r[:, 3])
-        return np.concatenate(pts)
+    def _world_vertices(scene, tris: np.ndarray) -> np.ndarray:
+        """The listed triangles' vertices in world space by the transforms the host wrote."""
+        q = tris.reshape(-1, 3, 4)
+        rows = scene.read_host_transforms().astype(np.float64)[q[:, 0, 3].view(np.int32)]
+        p = q[:, :, :3].astype(np.float64)
+        return (np.einsum("nij,nkj->nki", rows[:, :, :3], p) + rows[:, None, :, 3]).reshape(-1, 3)
 
     def _plan_map(self, light: int, toward, world: np.ndarray, n_cells: int) -> int:
         """Map ``light`` across the unit direction ``toward`` over the footprint of ``world``
