@@ -62,6 +62,10 @@ def add_arguments(p) -> None:
                    help="the shadow rays' crossings of the one instance holding dielectrics "
                         "(the water) walk it alone, or (off) go through the TLAS walk "
                         "(RenderSettings.direct_crossings; the same image)")
+    p.add_argument("--one-crossing", choices=("on", "off"), default="on",
+                   help="a shadow ray that climbs faster than the water's slopes crosses it at "
+                        "most once: leave out the walks that can find nothing, or (off) walk "
+                        "them (RenderSettings.one_crossing; the same image)")
     p.add_argument("--light-buffer", type=int, default=None, metavar="CELLS",
                    help="cells along each directional light's map of what blocks it "
                         "(RenderSettings.light_buffer: the shadow rays' any-hit query without a "
@@ -174,6 +178,7 @@ def run(args) -> int:
         if bins_arg is not None:
             world.renderer.set_cost_bins(bins_arg == "on")
         world.renderer.set_direct_crossings(getattr(args, "direct_crossings", "on") == "on")
+        world.renderer.set_one_crossing(getattr(args, "one_crossing", "on") == "on")
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -226,6 +231,7 @@ def run(args) -> int:
                "coop_from": world.renderer.settings.coop_from,
                "cost_bins": world.renderer.settings.cost_bins,
                "direct_crossings": world.renderer.settings.direct_crossings,
+               "one_crossing": world.renderer.settings.one_crossing,
                "light_buffer": world.renderer.settings.light_buffer,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,

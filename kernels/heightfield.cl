@@ -1,8 +1,10 @@
 /* The height field's per-frame pass (raytrace.scene.Scene.update), in place of a BVH refit:
      heightfield_bounds   one launch, one work-item per HF_BLOCK x HF_BLOCK block of cells
-   Reads each vertex once or twice (block edges are shared: (HF_BLOCK + 1)^2 reads per block),
-   writes 8 bytes per block (its y range) and the grid's box, into the HeightField record and
-   into the mesh's BvhInfo header, which the TLAS build reads as it reads a BLAS's root box. */
+   Reads each vertex of its block once for the y range ((HF_BLOCK + 1)^2 reads: block edges are
+   shared), then each cell's four corners again (from the cache) for its triangles' slopes, and
+   writes 8 bytes per block (its y range) and the grid's box and steepest slope into the
+   HeightField record, and the box into the mesh's BvhInfo header, which the TLAS build reads as
+   it reads a BLAS's root box. */
 #include "bvh.h"
 #include "heightfield.h"
 
@@ -34,6 +36,7 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
     const float tol_x = HF_GRID_TOL * fabs(dx), tol_z = HF_GRID_TOL * fabs(dz);
     int lo[3] = {INT_MAX, INT_MAX, INT_MAX}, hi[3] = {INT_MIN, INT_MIN, INT_MIN};
     int bad = 0;
+    float slope = 0.0f;
     if (b < nbx * nby) {
         const int bi = b % nbx, bj = b / nbx;
         const int i0 = bi * HF_BLOCK, i1 = min(i0 + HF_BLOCK, nx - 1);
@@ -58,6 +61,20 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
                 bhi = fmax(bhi, v.xyz);
             }
         }
+        /* the steepest triangle of the block's cells (a non-finite vertex: INFINITY) */
+        for (int j = j0; j < j1; ++j) {
+            for (int i = i0; i < i1; ++i) {
+                const int a = j * nx + i;
+                const float3 pa = verts[a].xyz, pb = verts[a + 1].xyz, pc = verts[a + nx].xyz,
+                             pd = verts[a + nx + 1].xyz;
+                for (int k = 0; k < 2; ++k) {   /* (a, c, b) and (b, c, d) */
+                    const float3 p0 = k ? pb : pa, p2 = k ? pd : pb;
+                    const float3 n = cross(pc - p0, p2 - p0);
+                    const float g = sqrt(n.x * n.x + n.z * n.z) / fabs(n.y);
+                    slope = isnan(g) ? INFINITY : fmax(slope, g);
+                }
+            }
+        }
         blocks[b] = (float2)(ymin, ymax);
         lo[0] = float_to_ordered(blo.x);
         lo[1] = float_to_ordered(blo.y);
@@ -70,6 +87,8 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
         hf_group_min_max(scratch, lid, &lo[a], 0);
         hf_group_min_max(scratch, lid, &hi[a], 1);
     }
+    int steepest = float_to_ordered(slope);
+    hf_group_min_max(scratch, lid, &steepest, 1);
     scratch[lid] = bad;
     barrier(CLK_LOCAL_MEM_FENCE);
     for (int s = HF_WG / 2; s > 0; s >>= 1) {
@@ -84,6 +103,7 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
         atomic_max(acc_hi + a, hi[a]);
     }
     if (scratch[0]) atomic_add(&hf->acc_bad, scratch[0]);
+    atomic_max(&hf->acc_slope, steepest);
     mem_fence(CLK_GLOBAL_MEM_FENCE);
     if (atomic_inc(&hf->ticket) != (int)get_num_groups(0) - 1) return;
     /* the last group: every other group's atomics are in */
@@ -96,6 +116,7 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
     box_hi.z = ordered_to_float(atomic_xchg(acc_hi + 2, INT_MIN));
     box_lo.w = box_hi.w = 0.0f;
     const int n_bad = atomic_xchg(&hf->acc_bad, 0);
+    hf->slope = ordered_to_float(atomic_xchg(&hf->acc_slope, INT_MIN));
     hf->lo = box_lo;
     hf->hi = box_hi;
     hf->x0 = v00.x;
@@ -110,4 +131,16 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
     info->n_bad = n_bad;
     info->lo = box_lo;
     info->hi = box_hi;
+}
+
+/* Tests: out[i] = hf_climbs(dirs[i]) | hf_over(points[i]) << 1, object space. */
+__kernel void heightfield_predicates(__global const HeightField* restrict hf,
+                                     __global const float4* restrict verts,
+                                     __global const float4* restrict points,
+                                     __global const float4* restrict dirs,
+                                     __global int* restrict out, const int n)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    out[i] = (int)hf_climbs(hf, dirs[i].xyz) | ((int)hf_over(hf, verts, points[i].xyz) << 1);
 }

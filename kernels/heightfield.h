@@ -18,14 +18,16 @@
    margin (HF_EPS, traverse_heightfield.h), so no triangle a ray hits is skipped */
 #define HF_GRID_TOL 0.002f
 
-/* 112 bytes: seven float4-sized rows.
+/* 128 bytes: eight float4-sized rows.
    lo, hi: the vertices' box (w unused), from the last bounds pass;
    x0, z0: vertex (0, 0)'s x and z; cells_per_x, cells_per_z: 1 / dx, 1 / dz (from the corners);
    nx, ny: vertices along x (i) and z (j); nbx, nby: blocks along x and z;
    mesh: the mesh id traced as this height field (HF_NONE: none); n_bad: vertices of the last
    pass that are non-finite or off the grid (raytrace.scene.Scene.check raises on them);
-   ticket, acc_bad, acc_lo, acc_hi: the pass's scratch (the last work-group to finish moves the
-   accumulators into lo, hi, n_bad and zeroes them: no reset launch). */
+   ticket, acc_bad, acc_lo, acc_hi, acc_slope: the pass's scratch (the last work-group to
+   finish moves the accumulators into lo, hi, n_bad, slope and resets them: no reset launch);
+   slope: the steepest triangle's |grad y| over x and z, from the last pass (INFINITY where a
+   vertex is not finite): hf_climbs. */
 typedef struct {
     float4 lo;
     float4 hi;
@@ -43,6 +45,52 @@ typedef struct {
     int acc_bad;
     int4 acc_lo;
     int4 acc_hi;
+    float slope;
+    int acc_slope;
+    int pad0;
+    int pad1;
 } HeightField;
+
+/* Whether a straight ray along object-space direction d rises faster than the grid's steepest
+   triangle: then its height over the surface, y(t) - h(x(t), z(t)), grows with t (h is
+   piecewise linear, its slope along d at most slope |d.xz|), so it crosses the surface at most
+   once, upward, and never where it starts over it. The margin is wider than the rounding of
+   slope and of d. */
+inline bool hf_climbs(__global const HeightField* restrict hf, float3 d)
+{
+    return d.y > 0.0f && d.y > hf->slope * 1.0001f * sqrt(d.x * d.x + d.z * d.z);
+}
+
+/* Whether object-space point o lies over the surface: over the plane of the triangle of its
+   cell it lies in (near the cell's diagonal, where the off-grid tolerance HF_GRID_TOL leaves
+   that open, over both), by more than the rounding. False (not known: walk) off the grid and
+   within HF_EPS_OVER cells of a cell's edge, where it may lie over a neighbouring cell. */
+#define HF_EPS_OVER 0.01f
+inline bool hf_over(__global const HeightField* restrict hf, __global const float4* restrict verts,
+                    float3 o)
+{
+    const float fu = (o.x - hf->x0) * hf->cells_per_x, fw = (o.z - hf->z0) * hf->cells_per_z;
+    const int nx = hf->nx;
+    if (!(fu >= 0.0f && fw >= 0.0f && fu < (float)(nx - 1) && fw < (float)(hf->ny - 1)))
+        return false;
+    const int i = (int)fu, j = (int)fw;
+    const float ru = fu - (float)i, rw = fw - (float)j;
+    if (ru < HF_EPS_OVER || ru > 1.0f - HF_EPS_OVER || rw < HF_EPS_OVER
+        || rw > 1.0f - HF_EPS_OVER)
+        return false;
+    const int a = j * nx + i;
+    const float3 pa = verts[a].xyz, pb = verts[a + 1].xyz, pc = verts[a + nx].xyz,
+                 pd = verts[a + nx + 1].xyz;
+    const float diag = ru + rw - 1.0f;   /* < 0: (a, c, b)'s side, > 0: (b, c, d)'s */
+    float h = -INFINITY;
+    for (int k = 0; k < 2; ++k) {   /* the triangles (a, c, b) and (b, c, d) */
+        if (k ? diag < -2.0f * HF_EPS_OVER : diag > 2.0f * HF_EPS_OVER) continue;
+        const float3 p0 = k ? pb : pa, p2 = k ? pd : pb;
+        const float3 n = cross(pc - p0, p2 - p0);
+        h = fmax(h, p0.y - (n.x * (o.x - p0.x) + n.z * (o.z - p0.z)) / n.y);
+    }
+    /* h's rounding: a few ulps of the larger of p0.y and the plane's rise (both small) */
+    return o.y > h + 2e-6f * (fabs(o.y) + fabs(h)) + 1e-12f;
+}
 
 #endif

@@ -25,7 +25,10 @@ inline float smooth01(float e0, float e1, float x)
  * dielectric (RENDER_MASK_TRANSMISSIVE; an opaque triangle there still blocks): where one
  * instance holds them all (RenderParams.crossing_instance: the water, as a rule), its own
  * BLAS or height-field walk alone, with no TLAS walk, which half the crossings of the water's
- * sunlit hits spent proving the ray misses the water's box. */
+ * sunlit hits spent proving the ray misses the water's box. Where that instance is the height
+ * field and the ray climbs faster than its slopes (RenderParams.one_crossing, hf_climbs), the
+ * walks that can find nothing are left out: the one from a point over the surface (hf_over:
+ * the water's own sunlit points) and the one after the ray leaves the water (the floor's). */
 inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
                                    __constant const RenderParams* prm, uint light, float3 org,
                                    float3 dir, float tmax, int medium)
@@ -38,11 +41,22 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFE
             && trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW)))
         return (float3)(0.0f);
     if (!prm->transmissive_shadows) return (float3)(1.0f);
+    /* a ray that climbs faster than the water's slopes (hf_climbs) crosses it at most once,
+       upward: from over the surface it crosses nothing, and after an exit nothing more */
+    const int ci = prm->crossing_instance;
+    bool climbs = false, over = false;
+    if (prm->one_crossing && ci >= 0 && instances[ci].mesh == hf_info->mesh) {
+        float3 oo, od;
+        trace_object_ray_od(instances + ci, org, dir, &oo, &od);
+        climbs = hf_climbs(hf_info, od);
+        over = climbs && (oo.y > hf_info->hi.y || hf_over(hf_info, hf_vertices, oo));
+    }
     float3 T = (float3)(1.0f);
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
-        const Hit h = trace_closest_only(TRACE_ARGS, org, dir, 0.0f, tmax,
-                                         RENDER_MASK_TRANSMISSIVE, prm->crossing_instance,
-                                         TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
+        Hit h = {INFINITY, 0.0f, 0.0f, -1, -1};
+        if (!(climbs && medium < 0 && (k || over)))
+            h = trace_closest_only(TRACE_ARGS, org, dir, 0.0f, tmax, RENDER_MASK_TRANSMISSIVE, ci,
+                                   TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
         if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;

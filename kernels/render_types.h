@@ -125,7 +125,9 @@ typedef struct {
     uint transmissive_shadows, tonemap, max_depth, capacity;
     float min_weight;
     int crossing_instance; /* the one instance holding the dielectrics, else -1 (render_shadow.h) */
-    float pad1, pad2;
+    uint one_crossing;  /* 1: where crossing_instance is the height field, rays that climb
+                           faster than its slopes cross it at most once (render_shadow.h) */
+    float pad2;
 } RenderParams;
 
 /* 16 bytes. render_raygen's per-launch values: the chunk it starts. */

@@ -146,6 +146,10 @@ class RenderSettings:
     direct_crossings: bool = True  #: a shadow ray's crossings of the scene's one instance
                                    #: holding dielectrics (the water) walk it alone, with no
                                    #: TLAS walk (RenderScene.crossing_instance); the same image
+    one_crossing: bool = True     #: where that instance is the height field and the shadow
+                                  #: ray climbs faster than its slopes, the crossings end
+                                  #: after the first (none from over the surface): the walks
+                                  #: that can find nothing are left out; the same image
     light_buffer: int = 0         #: cells along the longer side of each directional light's
                                   #: map of the opaque triangles' shadows (raytrace.light_buffer:
                                   #: the shadow rays' any-hit query without a BVH walk, the
@@ -454,6 +458,12 @@ class Renderer:
         --direct-crossings on|off). The same image either way."""
         self.settings = dataclasses.replace(self.settings, direct_crossings=bool(on))
 
+    def set_one_crossing(self, on: bool) -> None:
+        """Leave out the crossing walks that can find nothing (``one_crossing``) from the next
+        frame on; an A/B switch (bench frame --one-crossing on|off). The same image either
+        way."""
+        self.settings = dataclasses.replace(self.settings, one_crossing=bool(on))
+
     def set_stage_per_depth(self, on: bool = True) -> None:
         """Time each depth level's trace, shade, shadow, scan and gather under its own stage
         (``render.shadow.d3``), e.g. to see the tail levels of few rays (bench frame
@@ -653,6 +663,7 @@ class Renderer:
         p["cubemap_tex"] = max(sky.cubemap, 0) if sky.kind == SkyKind.CUBEMAP else 0
         p["transmissive_shadows"] = int(sc.has_dielectric)
         p["crossing_instance"] = sc.crossing_instance if s.direct_crossings else -1
+        p["one_crossing"] = int(s.one_crossing)
         p["tonemap"] = int(Tonemap.from_str(s.tonemap))
         p["max_depth"] = s.bounces
         p["capacity"] = self.capacity
@@ -865,7 +876,7 @@ class Renderer:
         cam = self.camera.tobytes()
         sc, s = self.scene, self.settings
         key = (sc.sky, tuple(sc.ambient), len(sc.lights), len(sc.materials),
-               sc.crossing_instance, s.direct_crossings)
+               sc.crossing_instance, s.direct_crossings, s.one_crossing)
         if key != self._params_key:
             self._params_key, self._params_rec = key, np.array([self.params()])
         prm = self._params_rec.tobytes()

@@ -100,7 +100,7 @@ RENDERPARAMS = np.dtype([("ambient", f4), ("sky_zenith", f4), ("sky_horizon", f4
                          ("cubemap_tex", np.uint32), ("transmissive_shadows", np.uint32),
                          ("tonemap", np.uint32), ("max_depth", np.uint32),
                          ("capacity", np.uint32), ("min_weight", np.float32),
-                         ("crossing_instance", np.int32), ("pad1", np.float32),
+                         ("crossing_instance", np.int32), ("one_crossing", np.uint32),
                          ("pad2", np.float32)])
 
 AOV = np.dtype([("normal", f4), ("depth", np.float32), ("prim", np.int32), ("inst", np.int32),

@@ -25,10 +25,10 @@ def binary_rt(rt):
 
 
 def test_struct_and_defines_match_the_header(rt):
-    assert HEIGHTFIELD_DTYPE.itemsize == 112
+    assert HEIGHTFIELD_DTYPE.itemsize == 128
     check_struct(rt, "heightfield.h", "HeightField", HEIGHTFIELD_DTYPE)
     size, _ = device_layout(rt, "heightfield.h", "HeightField", [])
-    assert size == 112
+    assert size == 128
     src = (rt_dir := __import__("kernels.runtime", fromlist=["KERNEL_DIR"]).KERNEL_DIR)
     text = (src / "heightfield.h").read_text()
     for name, value in (("HF_BLOCK", HF_BLOCK), ("HF_WG", HF_WG), ("HF_NONE", f"({HF_NONE})")):
@@ -266,7 +266,16 @@ def test_bounds_pass_equals_numpy(rt):
                 ys = Y[bj * HF_BLOCK:bj * HF_BLOCK + HF_BLOCK + 1,
                        bi * HF_BLOCK:bi * HF_BLOCK + HF_BLOCK + 1]
                 assert blocks[bj, bi, 0] == ys.min() and blocks[bj, bi, 1] == ys.max()
+        assert rec["slope"] == pytest.approx(steepest_slope(v, tri), rel=1e-5)
+        assert rec["acc_slope"] == np.iinfo(np.int32).min
     assert scene.check() == {"overflows": 0, "bad_triangles": 0}
+
+
+def steepest_slope(v, tri) -> float:
+    """float64: the largest |grad y| over x and z of the triangles."""
+    p = v.astype(np.float64)[tri]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    return float(np.max(np.hypot(n[:, 0], n[:, 2]) / np.abs(n[:, 1])))
 
 
 @pytest.mark.parametrize("fault", ["nan", "off_grid"])
@@ -283,7 +292,14 @@ def test_bad_vertices_are_reported(rt, fault):
     scene.add_instance(scene.add_mesh(vbuf, rt.to_device(tri.astype(np.uint32)), dynamic=True,
                                       n_vertices=len(v), n_triangles=len(tri), grid=(n, n)))
     scene.update()
-    assert scene.heightfield.read()["n_bad"] == 1
+    rec = scene.heightfield.read()
+    assert rec["n_bad"] == 1
+    # a NaN height leaves no ray known to climb over the grid; a vertex off the grid is still
+    # a triangle whose slope counts
+    if fault == "nan":
+        assert rec["slope"] == np.inf
+    else:
+        assert rec["slope"] == pytest.approx(steepest_slope(v, tri), rel=1e-5)
     with pytest.raises(ValueError, match="1 grid vertices are NaN, infinite or off"):
         scene.check()
 

@@ -134,6 +134,7 @@ def test_crossings_walk_the_height_field_alone(rt_count):
         world = World(scene, rt_count, width=40, height=24, cells=64, water_steps=2)
         assert world.water_accel == "grid"
         world.renderer.set_direct_crossings(direct)
+        world.renderer.set_one_crossing(False)   # every walk, as through the TLAS
         sc = world.render_scene
         sc.scene.reset_trace_counts()
         img = world.frame(0.0).copy()

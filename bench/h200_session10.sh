@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-02 (tenth session)" rows: one
+# crossing (RenderSettings.one_crossing: a shadow ray that climbs faster than the water's
+# steepest slope crosses it at most once, so the walks that can find nothing are left out)
+# against every walk. Usage:
+#   bench/h200_session10.sh OUTDIR PART
+# PART oc: the device tests of the height field and the shadow rays, then issue 9's baseline
+#   scene per depth (--no-overlap) and whole frames at 1920x1080, and the pool (floating boat,
+#   caustics) at 1920x1080, --one-crossing on and off in turns, twice;
+# PART size: the baseline scene at 3840x2160 and the pool per depth, on and off.
+# The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+set -uo pipefail
+out=${1:?OUTDIR}
+part=${2:?PART}
+mkdir -p "$out"
+source "$(dirname "$0")/h200_lib.sh"
+case $part in
+oc)
+    timeout 400 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_one_crossing.py \
+        tests/raytrace/test_heightfield.py tests/raytrace/test_render_shadow.py 2>&1 | tail -3
+    for rep in 1 2; do
+        for oc in on off; do
+            lb bench frame $f $static --per-depth --no-overlap --one-crossing $oc \
+                --out "$out/static_pd_oc${oc}_$rep" | tail -1
+            lb bench frame $f $static --one-crossing $oc --out "$out/static_oc${oc}_$rep" | tail -1
+            lb bench frame $f --one-crossing $oc --out "$out/pool_oc${oc}_$rep" | tail -1
+        done
+    done
+    ;;
+size)
+    for oc in on off; do
+        lb bench frame $k $static --one-crossing $oc --out "$out/static4k_oc$oc" | tail -1
+        lb bench frame $f --per-depth --no-overlap --one-crossing $oc --out "$out/pool_pd_oc$oc" \
+            | tail -1
+    done
+    ;;
+*)
+    echo "unknown PART $part" >&2
+    exit 2
+    ;;
+esac

@@ -1,0 +1,240 @@
+"""A shadow ray that climbs faster than the water's steepest slope crosses the height field at
+most once, upward (RenderSettings.one_crossing; kernels/heightfield.h: hf_climbs, hf_over).
+Checked here: that claim itself against a float64 brute force over every triangle; the two
+predicates against float64 (they never claim what is false, and they claim nearly all that is
+true away from a cell's edges); and frames with and without the shortcut, byte for byte, through
+every shadow kernel, with fewer walks where the sun climbs over the waves and the same walks where
+it does not. The bounds pass's slope against float64: tests/raytrace/test_heightfield.py."""
+
+import dataclasses
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from app.meshes import height_field_grid, smooth_normals
+from kernels.runtime import Runtime
+from raytrace import Scene
+from raytrace.render import Renderer, RenderSettings
+from raytrace.render_scene import Material, RenderScene
+from tests.raytrace.test_heightfield import steepest_slope
+from tests.raytrace.test_render_plans import BOX
+
+N = 33   # vertices per side of the test grid: cells of 1/16 over [-1, 1]^2
+
+
+@pytest.fixture(scope="module")
+def rt_count(rt):
+    return Runtime(rt.device, defines={"TRACE_COUNT": 1})
+
+
+def wavy_grid(jitter: float = 0.0, seed: int = 0):
+    """height_field_grid(N) (slopes up to about 0.6), its x and z moved by up to ``jitter``
+    cells (within the grid's tolerance, HF_GRID_TOL)."""
+    v, tri = height_field_grid(N, 0.4)
+    v = v.copy()
+    if jitter:
+        rng = np.random.default_rng(seed)
+        v[:, [0, 2]] += rng.uniform(-jitter, jitter, (len(v), 2)).astype(np.float32) * 2 / (N - 1)
+    return v, tri
+
+
+def surface_height(v, tri, xz):
+    """float64 height of the grid over each point of xz (n, 2), NaN off the grid."""
+    p = v.astype(np.float64)[tri]
+    a, b, c = p[:, 0][:, [0, 2]], p[:, 1][:, [0, 2]], p[:, 2][:, [0, 2]]
+    h = np.full(len(xz), np.nan)
+    for k in range(0, len(xz), 512):
+        q = xz[k:k + 512, None, :]
+        e1, e2, s = b - a, c - a, q - a
+        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        u = (s[..., 0] * e2[:, 1] - s[..., 1] * e2[:, 0]) / det
+        w = (e1[:, 0] * s[..., 1] - e1[:, 1] * s[..., 0]) / det
+        inside = (u >= 0) & (w >= 0) & (u + w <= 1)
+        y = (1 - u - w) * p[:, 0, 1] + u * p[:, 1, 1] + w * p[:, 2, 1]
+        row = np.where(inside.any(1), np.where(inside, y, -np.inf).max(1), np.nan)
+        h[k:k + 512] = row
+    return h
+
+
+def crossings(v, tri, org, d):
+    """float64: how many times each ray org + t d, t > 0, crosses the grid (Moeller-Trumbore on
+    every triangle; hits at one distance, an edge or vertex, count once)."""
+    p = v.astype(np.float64)[tri]
+    a, e1, e2 = p[:, 0], p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    out = np.zeros(len(org), int)
+    for i, (o, di) in enumerate(zip(org, d, strict=True)):
+        q = np.cross(di, e2)
+        det = (e1 * q).sum(1)
+        s = o - a
+        u = (s * q).sum(1) / det
+        r = np.cross(s, e1)
+        w = (r @ di) / det
+        t = (r * e2).sum(1) / det
+        hit = (u >= -1e-12) & (w >= -1e-12) & (u + w <= 1 + 1e-12) & (t > 1e-12)
+        out[i] = len(np.unique(np.round(t[hit], 9)))
+    return out
+
+
+def test_a_climbing_ray_crosses_the_surface_at_most_once():
+    """The claim the shortcut rests on, for the exact piecewise-linear surface: from over it, no
+    crossing; from under it, at most one (none where it leaves the grid's side first)."""
+    v, tri = wavy_grid()
+    g = steepest_slope(v, tri)
+    rng = np.random.default_rng(1)
+    n = 300
+    xz = rng.uniform(-0.95, 0.95, (n, 2))
+    h = surface_height(v, tri, xz)
+    gap = np.where(np.arange(n) % 2, 1, -1) * 10.0 ** rng.uniform(-6, -1, n)
+    org = np.c_[xz[:, 0], h + gap, xz[:, 1]]
+    az = rng.uniform(0, 2 * np.pi, n)
+    rise = g * rng.uniform(1.001, 3.0, n)   # climbs: d.y > slope |d.xz|
+    d = np.c_[np.cos(az), rise, np.sin(az)]
+    got = crossings(v, tri, org, d)
+    assert np.all(got[gap > 0] == 0)
+    assert np.all(got[gap < 0] <= 1) and got[gap < 0].mean() > 0.5
+    # a ray that rises slower than the steepest triangle is not bound by it: some cross more
+    flat = np.c_[np.cos(az), 0.05 * rise / g, np.sin(az)]
+    assert crossings(v, tri, org, flat).max() >= 2
+
+
+def predicates(rt, v, tri, points, dirs):
+    scene = Scene(rt)
+    scene.add_instance(scene.add_mesh(v, tri, grid=(N, N)))
+    scene.update()
+    hf = scene.heightfield.bindings()
+    k = rt.kernel_launcher("heightfield.cl", "heightfield_predicates", stage="test")
+    out = rt.buffer(4 * len(points))
+    p4, d4 = (np.c_[x, np.zeros(len(x))].astype(np.float32) for x in (points, dirs))
+    k.bind(hf=hf["hf_info"], verts=hf["hf_vertices"], points=rt.to_device(p4),
+           dirs=rt.to_device(d4), out=out, n=len(points))
+    k.launch(-(-len(points) // 64) * 64, 64)
+    got = rt.to_host(out, np.int32, len(points))
+    return (got & 1).astype(bool), (got & 2).astype(bool), float(scene.heightfield.read()["slope"])
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.0015])
+def test_predicates_never_claim_what_float64_denies(rt, jitter):
+    v, tri = wavy_grid(jitter)
+    rng = np.random.default_rng(2)
+    n = 6000
+    xz = rng.uniform(-1.05, 1.05, (n, 2))   # some off the grid
+    h = surface_height(v, tri, xz)
+    gap = rng.choice([-1, 1], n) * 10.0 ** rng.uniform(-8, -1, n)
+    gap[:200] = 0.0
+    y = np.where(np.isnan(h), rng.uniform(-0.1, 0.1, n), h + gap)
+    points = np.c_[xz[:, 0], y, xz[:, 1]].astype(np.float32)
+    dirs = rng.normal(size=(n, 3)).astype(np.float32)
+    climbs, over, slope = predicates(rt, v, tri, points, dirs)
+    g = steepest_slope(v, tri)
+    p = points.astype(np.float64)
+    h32 = surface_height(v, tri, p[:, [0, 2]])   # of the float32 point as stored
+    # never wrong
+    assert np.all(~over | (p[:, 1] > h32))
+    dd = dirs.astype(np.float64)
+    horizontal = np.hypot(dd[:, 0], dd[:, 2])
+    assert np.all(~climbs | (dd[:, 1] > g * horizontal))
+    # and right where it is clear: every ray rising 0.1% faster than the slope, and the points
+    # over the surface by more than 1e-5, in a cell, away from its edges and its diagonal
+    assert np.array_equal(climbs[dd[:, 1] > 1.001 * g * horizontal],
+                          np.ones((dd[:, 1] > 1.001 * g * horizontal).sum(), bool))
+    cell = (p[:, [0, 2]] + 1) * (N - 1) / 2
+    frac = cell - np.floor(cell)
+    inner = (((frac > 0.02) & (frac < 0.98)).all(1) & (np.abs(frac.sum(1) - 1) > 0.03)
+             & (cell > 0).all(1) & (cell < N - 1).all(1))
+    clear = inner & (p[:, 1] - h32 > 1e-5)
+    assert clear.sum() > 1000 and over[clear].all()
+    assert slope == pytest.approx(g, rel=1e-5)
+
+
+# -- frames with and without it -----------------------------------------------------------
+def pond(rt, sun):
+    """The wavy grid as the water (a height field written on the device), a tiled floor under
+    it, a box half under the water, a slab over it, and the sun."""
+    sc = RenderScene(rt)
+    floor = sc.add_material(Material(diffuse=(0.8, 0.75, 0.6), specular=(0.1, 0.1, 0.1)))
+    water = sc.add_material(Material(diffuse=(0, 0, 0), specular=(1, 1, 1), shininess=8,
+                                     ior=1.333, absorption=(0.45, 0.09, 0.06)))
+    red = sc.add_material(Material(diffuse=(0.7, 0.2, 0.1)))
+    v, tri = wavy_grid()
+    mesh, vbuf, nbuf = sc.add_dynamic_mesh(len(v), tri, material=water, grid=(N, N))
+    cl.enqueue_copy(rt.queue, vbuf, np.c_[v, np.zeros(len(v))].astype(np.float32))
+    cl.enqueue_copy(rt.queue, nbuf, np.c_[smooth_normals(v, tri), np.zeros(len(v))]
+                    .astype(np.float32))
+    sc.add_instance(mesh)
+    quad = np.array([[-1.5, -0.4, -1.5], [1.5, -0.4, -1.5], [1.5, -0.4, 1.5], [-1.5, -0.4, 1.5]])
+    sc.add_instance(sc.add_mesh(quad, [[0, 2, 1], [0, 3, 2]], material=floor))
+    box = sc.add_mesh(*BOX, material=red)
+    m = np.diag([0.5, 0.5, 0.5, 1.0])
+    m[:3, 3] = (0.3, -0.05, -0.2)
+    sc.add_instance(box, m)
+    m = np.diag([0.8, 0.05, 0.4, 1.0])
+    m[:3, 3] = (-0.5, 0.6, 0.3)
+    sc.add_instance(box, m)
+    sc.add_light("directional", direction=sun, color=(2.0, 1.9, 1.8))
+    return sc
+
+
+HIGH_SUN = (-0.4, -0.8, -0.3)    # rises 1.6 per unit across: over every slope of the grid
+LOW_SUN = (-0.9, -0.15, -0.4)    # rises 0.15: under the steepest ones
+
+
+def frames(rt, sun, settings):
+    """(image, crossing counters) with one_crossing on, then off."""
+    out = []
+    for on in (True, False):
+        sc = pond(rt, sun)
+        r = Renderer(rt, sc, dataclasses.replace(settings, one_crossing=on))
+        r.set_camera((0.4, 1.6, 1.9), (0, -0.2, 0), (0, 1, 0), 55)
+        sc.scene.update()
+        sc.scene.reset_trace_counts()
+        img = r.render()
+        out.append((img, sc.scene.trace_counts()["crossing"], sc, r))
+    return out
+
+
+@pytest.mark.parametrize("chunk,coop_from,bins,overlap_from",
+                         [(None, None, False, 1), (96, None, False, 0), (None, 1, True, 0)])
+def test_frames_are_the_frames_without_it(rt, chunk, coop_from, bins, overlap_from):
+    """Every shadow kernel: alone, with the next level's trace, chunked, binned, cooperative."""
+    s = RenderSettings(width=28, height=20, bounces=3, max_chunk_rays=chunk, coop_from=coop_from,
+                       cost_bins=bins, overlap_from=overlap_from)
+    (on, _, sc, r), (off, _, _, _) = frames(rt, HIGH_SUN, s)
+    assert np.array_equal(on, off) and on[..., :3].std() > 5
+    assert r.params()["one_crossing"] == 1 and sc.crossing_instance == 0
+
+
+def test_walks_only_what_can_cross(rt_count):
+    """High sun: the walks from over the water (its lit points) and after leaving it (the
+    floor's) are gone; low sun: every walk as before. The same bytes either way."""
+    s = RenderSettings(width=40, height=28, bounces=2)
+    (on, c_on, sc, _), (off, c_off, _, _) = frames(rt_count, HIGH_SUN, s)
+    assert np.array_equal(on, off)
+    assert c_on["hits"] == c_off["hits"] > 0
+    assert c_off["traversals"] > c_off["rays"]           # the second walks, after the exit
+    assert c_on["traversals"] == c_on["rays"]            # none now
+    assert c_on["traversals"] < 0.7 * c_off["traversals"]
+    assert c_on["rays"] < 0.85 * c_off["rays"]           # the water's own points walk none
+    assert sc.scene.heightfield.read()["slope"] < 0.8 / np.hypot(0.4, 0.3)
+    (on, c_on, sc, _), (off, c_off, _, _) = frames(rt_count, LOW_SUN, s)
+    assert np.array_equal(on, off)
+    assert c_on == c_off and c_on["hits"] > 0
+    assert sc.scene.heightfield.read()["slope"] > 0.15 / np.hypot(0.9, 0.4)
+
+
+def test_the_pool_frame_is_the_same_with_fewer_walks(rt_count):
+    """Issue 9's baseline scene through World: the same bytes, a fifth of the walks or fewer."""
+    from app.world import World
+
+    out = []
+    for on in (True, False):
+        world = World("bench/scenes/pool_static_boat.toml", rt_count, width=48, height=27,
+                      cells=64, water_steps=2)
+        world.renderer.set_one_crossing(on)
+        sc = world.render_scene
+        sc.scene.reset_trace_counts()
+        out.append((world.frame(0.0).copy(), sc.scene.trace_counts()["crossing"]))
+    (on, c_on), (off, c_off) = out
+    assert np.array_equal(on, off)
+    assert c_on["hits"] == c_off["hits"] > 0
+    assert c_on["traversals"] <= 0.4 * c_off["traversals"]
