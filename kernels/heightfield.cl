@@ -1,8 +1,7 @@
 /* The height field's per-frame pass (raytrace.scene.Scene.update), in place of a BVH refit:
      heightfield_bounds   one launch, one work-item per HF_BLOCK x HF_BLOCK block of cells
-   Reads each vertex of its block once for the y range ((HF_BLOCK + 1)^2 reads: block edges are
-   shared), then each cell's four corners again (from the cache) for its triangles' slopes, and
-   writes 8 bytes per block (its y range) and the grid's box and steepest slope into the
+   Reads each vertex of its block once ((HF_BLOCK + 1)^2 reads: block edges are shared) and
+   writes 8 bytes per block (its y range) and the grid's box and a bound on its slopes into the
    HeightField record, and the box into the mesh's BvhInfo header, which the TLAS build reads as
    it reads a BLAS's root box. */
 #include "bvh.h"
@@ -36,7 +35,11 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
     const float tol_x = HF_GRID_TOL * fabs(dx), tol_z = HF_GRID_TOL * fabs(dz);
     int lo[3] = {INT_MAX, INT_MAX, INT_MAX}, hi[3] = {INT_MIN, INT_MIN, INT_MIN};
     int bad = 0;
-    float slope = 0.0f;
+    /* the largest height step along an x edge and along a z edge (a non-finite vertex:
+       INFINITY), the previous row's heights in local memory */
+    float rise_x = 0.0f, rise_z = 0.0f;
+    __local float rows[HF_WG * (HF_BLOCK + 1)];
+    __local float* above = rows + lid * (HF_BLOCK + 1);
     if (b < nbx * nby) {
         const int bi = b % nbx, bj = b / nbx;
         const int i0 = bi * HF_BLOCK, i1 = min(i0 + HF_BLOCK, nx - 1);
@@ -45,6 +48,7 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
         float3 blo = (float3)(INFINITY), bhi = (float3)(-INFINITY);
         for (int j = j0; j <= j1; ++j) {
             const float zj = v00.z + (float)j * dz;
+            float left = 0.0f;
             for (int i = i0; i <= i1; ++i) {
                 const float4 v = verts[j * nx + i];
                 const bool finite = isfinite(v.x) && isfinite(v.y) && isfinite(v.z);
@@ -54,25 +58,17 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
                    grid's far edges, the last block */
                 const bool own = (i < i1 || i == nx - 1) && (j < j1 || j == ny - 1);
                 if (own && !(finite && on_grid)) bad++;
-                if (!finite) continue;
+                if (i > i0) rise_x = fmax(rise_x, fabs(v.y - left));
+                if (j > j0) rise_z = fmax(rise_z, fabs(v.y - above[i - i0]));
+                left = above[i - i0] = v.y;
+                if (!finite) {
+                    rise_x = INFINITY;
+                    continue;
+                }
                 ymin = fmin(ymin, v.y);
                 ymax = fmax(ymax, v.y);
                 blo = fmin(blo, v.xyz);
                 bhi = fmax(bhi, v.xyz);
-            }
-        }
-        /* the steepest triangle of the block's cells (a non-finite vertex: INFINITY) */
-        for (int j = j0; j < j1; ++j) {
-            for (int i = i0; i < i1; ++i) {
-                const int a = j * nx + i;
-                const float3 pa = verts[a].xyz, pb = verts[a + 1].xyz, pc = verts[a + nx].xyz,
-                             pd = verts[a + nx + 1].xyz;
-                for (int k = 0; k < 2; ++k) {   /* (a, c, b) and (b, c, d) */
-                    const float3 p0 = k ? pb : pa, p2 = k ? pd : pb;
-                    const float3 n = cross(pc - p0, p2 - p0);
-                    const float g = sqrt(n.x * n.x + n.z * n.z) / fabs(n.y);
-                    slope = isnan(g) ? INFINITY : fmax(slope, g);
-                }
             }
         }
         blocks[b] = (float2)(ymin, ymax);
@@ -87,8 +83,9 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
         hf_group_min_max(scratch, lid, &lo[a], 0);
         hf_group_min_max(scratch, lid, &hi[a], 1);
     }
-    int steepest = float_to_ordered(slope);
-    hf_group_min_max(scratch, lid, &steepest, 1);
+    int steep_x = float_to_ordered(rise_x), steep_z = float_to_ordered(rise_z);
+    hf_group_min_max(scratch, lid, &steep_x, 1);
+    hf_group_min_max(scratch, lid, &steep_z, 1);
     scratch[lid] = bad;
     barrier(CLK_LOCAL_MEM_FENCE);
     for (int s = HF_WG / 2; s > 0; s >>= 1) {
@@ -103,7 +100,8 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
         atomic_max(acc_hi + a, hi[a]);
     }
     if (scratch[0]) atomic_add(&hf->acc_bad, scratch[0]);
-    atomic_max(&hf->acc_slope, steepest);
+    atomic_max(&hf->acc_rise_x, steep_x);
+    atomic_max(&hf->acc_rise_z, steep_z);
     mem_fence(CLK_GLOBAL_MEM_FENCE);
     if (atomic_inc(&hf->ticket) != (int)get_num_groups(0) - 1) return;
     /* the last group: every other group's atomics are in */
@@ -116,7 +114,11 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
     box_hi.z = ordered_to_float(atomic_xchg(acc_hi + 2, INT_MIN));
     box_lo.w = box_hi.w = 0.0f;
     const int n_bad = atomic_xchg(&hf->acc_bad, 0);
-    hf->slope = ordered_to_float(atomic_xchg(&hf->acc_slope, INT_MIN));
+    /* a triangle's slope over x is one x edge's step over dx (over z: a z edge's), up to the
+       off-grid tolerance, which HF_SLOPE_MARGIN covers */
+    const float sx = ordered_to_float(atomic_xchg(&hf->acc_rise_x, INT_MIN)) / fabs(dx);
+    const float sz = ordered_to_float(atomic_xchg(&hf->acc_rise_z, INT_MIN)) / fabs(dz);
+    hf->slope = HF_SLOPE_MARGIN * sqrt(sx * sx + sz * sz);
     hf->lo = box_lo;
     hf->hi = box_hi;
     hf->x0 = v00.x;

@@ -17,6 +17,9 @@
 /* vertices may sit this many cells off the regular grid; the walk's cell ranges have a wider
    margin (HF_EPS, traverse_heightfield.h), so no triangle a ray hits is skipped */
 #define HF_GRID_TOL 0.002f
+/* HeightField.slope's factor over the regular grid's edge steps: vertices off the grid by
+   HF_GRID_TOL change a triangle's gradient by under 2% */
+#define HF_SLOPE_MARGIN 1.05f
 
 /* 128 bytes: eight float4-sized rows.
    lo, hi: the vertices' box (w unused), from the last bounds pass;
@@ -24,10 +27,13 @@
    nx, ny: vertices along x (i) and z (j); nbx, nby: blocks along x and z;
    mesh: the mesh id traced as this height field (HF_NONE: none); n_bad: vertices of the last
    pass that are non-finite or off the grid (raytrace.scene.Scene.check raises on them);
-   ticket, acc_bad, acc_lo, acc_hi, acc_slope: the pass's scratch (the last work-group to
-   finish moves the accumulators into lo, hi, n_bad, slope and resets them: no reset launch);
-   slope: the steepest triangle's |grad y| over x and z, from the last pass (INFINITY where a
-   vertex is not finite): hf_climbs. */
+   ticket, acc_bad, acc_lo, acc_hi, acc_rise_x, acc_rise_z: the pass's scratch (the last
+   work-group to finish moves the accumulators into lo, hi, n_bad, slope and resets them: no
+   reset launch);
+   slope: a bound on every triangle's |grad y| over x and z, from the last pass: HF_SLOPE_MARGIN
+   times the hypotenuse of the largest height step along an x edge over dx and along a z edge
+   over dz (a triangle's gradient is one of each on the regular grid; the margin covers the
+   off-grid tolerance), INFINITY where a vertex is not finite: hf_climbs. */
 typedef struct {
     float4 lo;
     float4 hi;
@@ -46,9 +52,9 @@ typedef struct {
     int4 acc_lo;
     int4 acc_hi;
     float slope;
-    int acc_slope;
+    int acc_rise_x;
+    int acc_rise_z;
     int pad0;
-    int pad1;
 } HeightField;
 
 /* Whether a straight ray along object-space direction d rises faster than the grid's steepest

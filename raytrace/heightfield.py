@@ -25,13 +25,15 @@ HEIGHTFIELD_DTYPE = np.dtype([
     ("cells_per_x", np.float32), ("cells_per_z", np.float32), ("nx", np.int32), ("ny", np.int32),
     ("nbx", np.int32), ("nby", np.int32), ("mesh", np.int32), ("n_bad", np.int32),
     ("ticket", np.int32), ("acc_bad", np.int32), ("acc_lo", np.int32, 4),
-    ("acc_hi", np.int32, 4), ("slope", np.float32), ("acc_slope", np.int32), ("pad0", np.int32),
-    ("pad1", np.int32)])
+    ("acc_hi", np.int32, 4), ("slope", np.float32), ("acc_rise_x", np.int32),
+    ("acc_rise_z", np.int32), ("pad0", np.int32)])
 #: kernels/heightfield.h: cells per side of a y-range block, the bounds pass's work-group, and
 #: the mesh id of no height field.
 HF_BLOCK = 8
 HF_WG = 64
 HF_NONE = -1
+#: kernels/heightfield.h: HeightField.slope's factor over the grid's largest edge steps.
+HF_SLOPE_MARGIN = 1.05
 _INT_MAX, _INT_MIN = 2**31 - 1, -(2**31)
 
 
@@ -81,7 +83,8 @@ class HeightField:
         rec = np.zeros(1, HEIGHTFIELD_DTYPE)
         nbx, nby = grid_blocks(nx, ny)
         rec["mesh"], rec["nx"], rec["ny"], rec["nbx"], rec["nby"] = mesh, nx, ny, nbx, nby
-        rec["acc_lo"], rec["acc_hi"], rec["acc_slope"] = _INT_MAX, _INT_MIN, _INT_MIN
+        rec["acc_lo"], rec["acc_hi"] = _INT_MAX, _INT_MIN
+        rec["acc_rise_x"] = rec["acc_rise_z"] = _INT_MIN
         rec["slope"] = np.inf   # no pass yet: no ray is known to climb over it
         return rec
 

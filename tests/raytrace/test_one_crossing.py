@@ -133,18 +133,18 @@ def test_predicates_never_claim_what_float64_denies(rt, jitter):
     assert np.all(~over | (p[:, 1] > h32))
     dd = dirs.astype(np.float64)
     horizontal = np.hypot(dd[:, 0], dd[:, 2])
-    assert np.all(~climbs | (dd[:, 1] > g * horizontal))
-    # and right where it is clear: every ray rising 0.1% faster than the slope, and the points
+    assert g <= slope <= 1.5 * g
+    assert np.all(~climbs | (dd[:, 1] > slope * horizontal))
+    # and right where it is clear: every ray rising 0.1% faster than the bound, and the points
     # over the surface by more than 1e-5, in a cell, away from its edges and its diagonal
-    assert np.array_equal(climbs[dd[:, 1] > 1.001 * g * horizontal],
-                          np.ones((dd[:, 1] > 1.001 * g * horizontal).sum(), bool))
+    fast = dd[:, 1] > 1.001 * slope * horizontal
+    assert fast.sum() > 1000 and climbs[fast].all()
     cell = (p[:, [0, 2]] + 1) * (N - 1) / 2
     frac = cell - np.floor(cell)
     inner = (((frac > 0.02) & (frac < 0.98)).all(1) & (np.abs(frac.sum(1) - 1) > 0.03)
              & (cell > 0).all(1) & (cell < N - 1).all(1))
     clear = inner & (p[:, 1] - h32 > 1e-5)
     assert clear.sum() > 1000 and over[clear].all()
-    assert slope == pytest.approx(g, rel=1e-5)
 
 
 # -- frames with and without it -----------------------------------------------------------
