@@ -8,6 +8,9 @@
 #   scene per depth (--no-overlap) and whole frames at 1920x1080, and the pool (floating boat,
 #   caustics) at 1920x1080, --one-crossing on and off in turns, twice;
 # PART size: the baseline scene at 3840x2160 and the pool per depth, on and off.
+# PART tune: the kernel choices tuned before the light buffer and one crossing, again: the
+#   baseline scene and the pool at 1920x1080 with the defaults (first and last) and with
+#   --cost-bins off, --overlap-from 0 and 2, --coop-from 1 and 3.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -32,6 +35,18 @@ size)
         lb bench frame $k $static --one-crossing $oc --out "$out/static4k_oc$oc" | tail -1
         lb bench frame $f --per-depth --no-overlap --one-crossing $oc --out "$out/pool_pd_oc$oc" \
             | tail -1
+    done
+    ;;
+tune)
+    for scene in static pool; do
+        sc=""
+        [ $scene = static ] && sc=$static
+        lb bench frame $f $sc --out "$out/${scene}_default_1" | tail -1
+        for v in "--cost-bins off" "--overlap-from 0" "--overlap-from 2" "--coop-from 1" \
+                 "--coop-from 3"; do
+            lb bench frame $f $sc $v --out "$out/${scene}_$(echo $v | tr -d ' -')" | tail -1
+        done
+        lb bench frame $f $sc --out "$out/${scene}_default_2" | tail -1
     done
     ;;
 *)
