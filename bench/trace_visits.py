@@ -41,13 +41,16 @@ def scene_variant(scene, boat: str, old_y: float):
     return dataclasses.replace(scene, boats=scene.boats[1:], meshes=(*scene.meshes, mesh))
 
 
-def measure(rt, scene, *, cells, size, caustics, settle, frames=1, light_buffer=0) -> dict:
+def measure(rt, scene, *, cells, size, caustics, settle, frames=1, light_buffer=0,
+            one_crossing=True) -> dict:
     """Counters of ``frames`` frames after ``settle`` seconds of water, per ray kind (a shadow
-    ray that the light buffer answers walks nothing and is not counted)."""
+    ray that the light buffer answers, or whose crossings one crossing leaves out, walks
+    nothing and is not counted)."""
     from app.world import World
 
     world = World(scene, rt, width=size[0], height=size[1], cells=cells, caustics=caustics,
                   light_buffer=light_buffer)
+    world.renderer.set_one_crossing(one_crossing)
     if settle > 0:
         world.frame(settle)
     sc = world.render_scene.scene
@@ -55,7 +58,9 @@ def measure(rt, scene, *, cells, size, caustics, settle, frames=1, light_buffer=
     for _ in range(frames):
         world.frame(0.0)
     counts = sc.trace_counts()
+    hf = sc.heightfield.read()
     out = {"rays_per_depth": world.renderer.read_stats()["rays_per_depth"],
+           "water_slope_bound": float(hf["slope"]) if sc.heightfield.mesh is not None else None,
            "instances": {int(k): v for k, v in world.instances.items()}, "raw": counts}
     for kind in KINDS:
         c = counts[kind]
@@ -84,6 +89,9 @@ def main(argv=None) -> int:
     p.add_argument("--light-buffer", type=int, default=0, metavar="CELLS",
                    help="each directional light's map of what blocks it (RenderSettings."
                         "light_buffer): the shadow rays it answers walk nothing; default 0: none")
+    p.add_argument("--one-crossing", choices=("on", "off"), default="on",
+                   help="leave out the crossing walks that can find nothing (RenderSettings."
+                        "one_crossing), or walk them; default on")
     p.add_argument("--json", help="write the numbers here")
     args = p.parse_args(argv)
 
@@ -100,11 +108,13 @@ def main(argv=None) -> int:
         for caustics in args.caustics:
             scene = scene_variant(base, boat, args.old_y)
             r = measure(rt, scene, cells=args.cells, size=args.size, caustics=caustics,
-                        settle=args.settle, light_buffer=args.light_buffer)
+                        settle=args.settle, light_buffer=args.light_buffer,
+                        one_crossing=args.one_crossing == "on")
             r.update(boat=boat, caustics=caustics)
             results.append(r)
             print(f"-- boat {boat}, caustics {caustics}: rays per depth {r['rays_per_depth']}; "
-                  f"instances {r['instances']}")
+                  f"instances {r['instances']}; the water's slope bound "
+                  f"{r['water_slope_bound']}")
             for kind in KINDS:
                 k = r[kind]
                 if not k["rays"]:
