@@ -8,6 +8,10 @@
 #   scene per depth (--no-overlap) and whole frames at 1920x1080, and the pool (floating boat,
 #   caustics) at 1920x1080, --one-crossing on and off in turns, twice;
 # PART size: the baseline scene at 3840x2160 and the pool per depth, on and off.
+# PART cull: every walk of the height field culls the rays that cannot meet the surface
+#   (hf_unreachable; HF_CULL_UNREACHABLE 1) against a copy of the tree built with it 0: its
+#   device tests, then the baseline scene per depth and whole, the pool whole, in turns twice,
+#   the pool per depth and the baseline scene at 3840x2160.
 # PART tune: the kernel choices tuned before the light buffer and one crossing, again: the
 #   baseline scene and the pool at 1920x1080 with the defaults (first and last) and with
 #   --cost-bins off, --overlap-from 0 and 2, --coop-from 1 and 3.
@@ -36,6 +40,28 @@ size)
         lb bench frame $f --per-depth --no-overlap --one-crossing $oc --out "$out/pool_pd_oc$oc" \
             | tail -1
     done
+    ;;
+cull)
+    variant_tree /tmp/walkall \
+        's/^#define HF_CULL_UNREACHABLE 1/#define HF_CULL_UNREACHABLE 0/' \
+        kernels/traverse_heightfield.h
+    timeout 300 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_one_crossing.py \
+        tests/raytrace/test_heightfield.py 2>&1 | tail -3
+    for rep in 1 2; do
+        lb bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_cull_$rep" \
+            | tail -1
+        in_tree /tmp/walkall bench frame $f $static --per-depth --no-overlap \
+            --out "$out/static_pd_walkall_$rep" | tail -1
+        lb bench frame $f $static --out "$out/static_cull_$rep" | tail -1
+        in_tree /tmp/walkall bench frame $f $static --out "$out/static_walkall_$rep" | tail -1
+        lb bench frame $f --out "$out/pool_cull_$rep" | tail -1
+        in_tree /tmp/walkall bench frame $f --out "$out/pool_walkall_$rep" | tail -1
+    done
+    lb bench frame $f --per-depth --no-overlap --out "$out/pool_pd_cull" | tail -1
+    in_tree /tmp/walkall bench frame $f --per-depth --no-overlap --out "$out/pool_pd_walkall" \
+        | tail -1
+    lb bench frame $k $static --out "$out/static4k_cull" | tail -1
+    in_tree /tmp/walkall bench frame $k $static --out "$out/static4k_walkall" | tail -1
     ;;
 tune)
     for scene in static pool; do

@@ -135,7 +135,8 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
     info->hi = box_hi;
 }
 
-/* Tests: out[i] = hf_climbs(dirs[i]) | hf_over(points[i]) << 1, object space. */
+/* Tests, object space: out[i] = hf_climbs(dirs[i]) | hf_sinks(dirs[i]) << 1
+   | (hf_side(points[i]) + 1) << 2 | hf_unreachable(points[i], dirs[i]) << 4. */
 __kernel void heightfield_predicates(__global const HeightField* restrict hf,
                                      __global const float4* restrict verts,
                                      __global const float4* restrict points,
@@ -144,5 +145,7 @@ __kernel void heightfield_predicates(__global const HeightField* restrict hf,
 {
     const int i = get_global_id(0);
     if (i >= n) return;
-    out[i] = (int)hf_climbs(hf, dirs[i].xyz) | ((int)hf_over(hf, verts, points[i].xyz) << 1);
+    const float3 o = points[i].xyz, d = dirs[i].xyz;
+    out[i] = (int)hf_climbs(hf, d) | (int)hf_sinks(hf, d) << 1
+             | (hf_side(hf, verts, o) + 1) << 2 | (int)hf_unreachable(hf, verts, o, d) << 4;
 }

@@ -57,46 +57,65 @@ typedef struct {
     int pad0;
 } HeightField;
 
-/* Whether a straight ray along object-space direction d rises faster than the grid's steepest
-   triangle: then its height over the surface, y(t) - h(x(t), z(t)), grows with t (h is
-   piecewise linear, its slope along d at most slope |d.xz|), so it crosses the surface at most
-   once, upward, and never where it starts over it. The margin is wider than the rounding of
-   slope and of d. */
+/* Whether a straight ray along object-space direction d rises (sinks) faster than the grid's
+   steepest triangle: then its height over the surface, y(t) - h(x(t), z(t)), grows (falls)
+   with t (h is piecewise linear, its slope along d at most slope |d.xz|), so it crosses the
+   surface at most once, upward (downward), and never where it starts over (under) it. The
+   margin is wider than the rounding of slope and of d. */
 inline bool hf_climbs(__global const HeightField* restrict hf, float3 d)
 {
     return d.y > 0.0f && d.y > hf->slope * 1.0001f * sqrt(d.x * d.x + d.z * d.z);
 }
 
-/* Whether object-space point o lies over the surface: over the plane of the triangle of its
-   cell it lies in (near the cell's diagonal, where the off-grid tolerance HF_GRID_TOL leaves
-   that open, over both), by more than the rounding. False (not known: walk) off the grid and
-   within HF_EPS_OVER cells of a cell's edge, where it may lie over a neighbouring cell. */
-#define HF_EPS_OVER 0.01f
-inline bool hf_over(__global const HeightField* restrict hf, __global const float4* restrict verts,
-                    float3 o)
+inline bool hf_sinks(__global const HeightField* restrict hf, float3 d)
+{
+    return d.y < 0.0f && -d.y > hf->slope * 1.0001f * sqrt(d.x * d.x + d.z * d.z);
+}
+
+/* Which side of the surface object-space point o lies on: 1 over, -1 under, 0 not known. It
+   compares o with the plane of the triangle of its cell it lies in (near the cell's diagonal,
+   where the off-grid tolerance HF_GRID_TOL leaves that open, with both), by more than the
+   rounding; not known off the grid, within HF_EPS_SIDE cells of a cell's edge (o may lie over
+   a neighbouring cell) and within the rounding of the plane. */
+#define HF_EPS_SIDE 0.01f
+inline int hf_side(__global const HeightField* restrict hf, __global const float4* restrict verts,
+                   float3 o)
 {
     const float fu = (o.x - hf->x0) * hf->cells_per_x, fw = (o.z - hf->z0) * hf->cells_per_z;
     const int nx = hf->nx;
     if (!(fu >= 0.0f && fw >= 0.0f && fu < (float)(nx - 1) && fw < (float)(hf->ny - 1)))
-        return false;
+        return 0;
     const int i = (int)fu, j = (int)fw;
     const float ru = fu - (float)i, rw = fw - (float)j;
-    if (ru < HF_EPS_OVER || ru > 1.0f - HF_EPS_OVER || rw < HF_EPS_OVER
-        || rw > 1.0f - HF_EPS_OVER)
-        return false;
+    if (ru < HF_EPS_SIDE || ru > 1.0f - HF_EPS_SIDE || rw < HF_EPS_SIDE
+        || rw > 1.0f - HF_EPS_SIDE)
+        return 0;
     const int a = j * nx + i;
     const float3 pa = verts[a].xyz, pb = verts[a + 1].xyz, pc = verts[a + nx].xyz,
                  pd = verts[a + nx + 1].xyz;
     const float diag = ru + rw - 1.0f;   /* < 0: (a, c, b)'s side, > 0: (b, c, d)'s */
-    float h = -INFINITY;
+    float hmin = INFINITY, hmax = -INFINITY;
     for (int k = 0; k < 2; ++k) {   /* the triangles (a, c, b) and (b, c, d) */
-        if (k ? diag < -2.0f * HF_EPS_OVER : diag > 2.0f * HF_EPS_OVER) continue;
+        if (k ? diag < -2.0f * HF_EPS_SIDE : diag > 2.0f * HF_EPS_SIDE) continue;
         const float3 p0 = k ? pb : pa, p2 = k ? pd : pb;
         const float3 n = cross(pc - p0, p2 - p0);
-        h = fmax(h, p0.y - (n.x * (o.x - p0.x) + n.z * (o.z - p0.z)) / n.y);
+        const float h = p0.y - (n.x * (o.x - p0.x) + n.z * (o.z - p0.z)) / n.y;
+        hmin = fmin(hmin, h);
+        hmax = fmax(hmax, h);
     }
     /* h's rounding: a few ulps of the larger of p0.y and the plane's rise (both small) */
-    return o.y > h + 2e-6f * (fabs(o.y) + fabs(h)) + 1e-12f;
+    const float tol = 2e-6f * (fabs(o.y) + fmax(fabs(hmin), fabs(hmax))) + 1e-12f;
+    return o.y > hmax + tol ? 1 : o.y < hmin - tol ? -1 : 0;
+}
+
+/* Whether the ray o + t d, t >= 0, cannot meet the surface: from over it rising faster than
+   its slopes, or from under it sinking faster (trace_heightfield skips the walk then). */
+inline bool hf_unreachable(__global const HeightField* restrict hf,
+                           __global const float4* restrict verts, float3 o, float3 d)
+{
+    if (hf_climbs(hf, d)) return o.y > hf->hi.y || hf_side(hf, verts, o) > 0;
+    if (hf_sinks(hf, d)) return o.y < hf->lo.y || hf_side(hf, verts, o) < 0;
+    return false;
 }
 
 #endif

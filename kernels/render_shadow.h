@@ -27,8 +27,9 @@ inline float smooth01(float e0, float e1, float x)
  * BLAS or height-field walk alone, with no TLAS walk, which half the crossings of the water's
  * sunlit hits spent proving the ray misses the water's box. Where that instance is the height
  * field and the ray climbs faster than its slopes (RenderParams.one_crossing, hf_climbs), the
- * walks that can find nothing are left out: the one from a point over the surface (hf_over:
- * the water's own sunlit points) and the one after the ray leaves the water (the floor's). */
+ * walks that can find nothing are left out: the one from a point over the surface
+ * (hf_unreachable: the water's own sunlit points) and the one after the ray leaves the water
+ * (the floor's). */
 inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
                                    __constant const RenderParams* prm, uint light, float3 org,
                                    float3 dir, float tmax, int medium)
@@ -49,7 +50,7 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFE
         float3 oo, od;
         trace_object_ray_od(instances + ci, org, dir, &oo, &od);
         climbs = hf_climbs(hf_info, od);
-        over = climbs && (oo.y > hf_info->hi.y || hf_over(hf_info, hf_vertices, oo));
+        over = climbs && hf_unreachable(hf_info, hf_vertices, oo, od);
     }
     float3 T = (float3)(1.0f);
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {

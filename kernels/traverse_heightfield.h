@@ -4,7 +4,10 @@
    the ray passes over while inside it (one or two, three with the margins); a cell's two
    triangles are tested only when the ray's height over the column meets the cell's y range.
    Columns go HF_BLOCK at a time: a span whose blocks' y ranges the ray misses is skipped whole,
-   so a ray crosses the grid's slab in a few steps where the water is flat.
+   so a ray crosses the grid's slab in a few steps where the water is flat. A ray that starts
+   in the slab and cannot meet the surface (hf_unreachable: over it and rising faster than its
+   slopes, or under it and sinking faster; the water's reflections, refractions and shadow
+   rays, as a rule) walks nothing.
 
    Every range has a margin of HF_EPS cells, wider than the rounding of the ray's cell
    coordinates and the grid's own tolerance (HF_GRID_TOL), so no triangle the ray hits is left
@@ -19,6 +22,11 @@
 #define LBWATER_TRAVERSE_HEIGHTFIELD_H
 
 #define HF_EPS 0.01f /* cells */
+/* 1: a ray that cannot meet the surface (hf_unreachable) walks nothing; 0: every ray walks
+   (the A/B: the same hits) */
+#ifndef HF_CULL_UNREACHABLE
+#define HF_CULL_UNREACHABLE 1
+#endif
 
 /* The triangles of cell (i, j) if the ray's heights [ylo, yhi] meet the cell's. */
 TRACE_INLINE bool hf_cell(__global const float4* restrict verts, int nx, int i, int j,
@@ -101,6 +109,11 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
     const float ta = TRACE_MAX(tn.x, TRACE_MAX(tn.y, TRACE_MAX(tn.z, tmin)));
     const float tb = TRACE_MIN(tf.x, TRACE_MIN(tf.y, TRACE_MIN(tf.z, *tmax)));
     if (!(ta <= tb)) return false;
+#if HF_CULL_UNREACHABLE
+    /* a ray from the slab that rises from over the surface, or sinks from under it, faster
+       than its slopes (a reflection or refraction off the water, a shadow ray from it) */
+    if (hf_unreachable(hf, verts, o, d)) return false;
+#endif
     const int nx = hf->nx, ny = hf->ny, nbx = hf->nbx;
     /* u along x (cells i) or along z (cells j): the axis the ray crosses more cells of */
     const bool ux = fabs(d.x * hf->cells_per_x) >= fabs(d.z * hf->cells_per_z);

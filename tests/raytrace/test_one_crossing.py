@@ -17,8 +17,9 @@ from kernels.runtime import Runtime
 from raytrace import Scene
 from raytrace.render import Renderer, RenderSettings
 from raytrace.render_scene import Material, RenderScene
-from tests.raytrace.test_heightfield import steepest_slope
+from tests.raytrace.test_heightfield import assert_identical, scenes, steepest_slope
 from tests.raytrace.test_render_plans import BOX
+from tests.raytrace.test_trace_coop import trace
 
 N = 33   # vertices per side of the test grid: cells of 1/16 over [-1, 1]^2
 
@@ -26,6 +27,11 @@ N = 33   # vertices per side of the test grid: cells of 1/16 over [-1, 1]^2
 @pytest.fixture(scope="module")
 def rt_count(rt):
     return Runtime(rt.device, defines={"TRACE_COUNT": 1})
+
+
+@pytest.fixture(scope="module")
+def binary_rt(rt):
+    return Runtime(rt.device, bvh_layout="binary")
 
 
 def wavy_grid(jitter: float = 0.0, seed: int = 0):
@@ -99,6 +105,8 @@ def test_a_climbing_ray_crosses_the_surface_at_most_once():
 
 
 def predicates(rt, v, tri, points, dirs):
+    """The kernel's hf_climbs, hf_sinks, hf_side and hf_unreachable of each point and direction,
+    and the grid's slope bound."""
     scene = Scene(rt)
     scene.add_instance(scene.add_mesh(v, tri, grid=(N, N)))
     scene.update()
@@ -110,41 +118,73 @@ def predicates(rt, v, tri, points, dirs):
            dirs=rt.to_device(d4), out=out, n=len(points))
     k.launch(-(-len(points) // 64) * 64, 64)
     got = rt.to_host(out, np.int32, len(points))
-    return (got & 1).astype(bool), (got & 2).astype(bool), float(scene.heightfield.read()["slope"])
+    return {"climbs": (got & 1) > 0, "sinks": (got & 2) > 0, "side": ((got >> 2) & 3) - 1,
+            "unreachable": (got & 16) > 0, "slope": float(scene.heightfield.read()["slope"])}
 
 
-@pytest.mark.parametrize("jitter", [0.0, 0.0015])
-def test_predicates_never_claim_what_float64_denies(rt, jitter):
-    v, tri = wavy_grid(jitter)
-    rng = np.random.default_rng(2)
-    n = 6000
-    xz = rng.uniform(-1.05, 1.05, (n, 2))   # some off the grid
+def near_surface(v, tri, n, seed):
+    """n points over [-1.05, 1.05]^2 (some off the grid) within 1e-8..0.1 over or under the
+    surface (200 on it), and n random directions, all float32."""
+    rng = np.random.default_rng(seed)
+    xz = rng.uniform(-1.05, 1.05, (n, 2))
     h = surface_height(v, tri, xz)
     gap = rng.choice([-1, 1], n) * 10.0 ** rng.uniform(-8, -1, n)
     gap[:200] = 0.0
     y = np.where(np.isnan(h), rng.uniform(-0.1, 0.1, n), h + gap)
     points = np.c_[xz[:, 0], y, xz[:, 1]].astype(np.float32)
-    dirs = rng.normal(size=(n, 3)).astype(np.float32)
-    climbs, over, slope = predicates(rt, v, tri, points, dirs)
-    g = steepest_slope(v, tri)
-    p = points.astype(np.float64)
-    h32 = surface_height(v, tri, p[:, [0, 2]])   # of the float32 point as stored
+    return points, rng.normal(size=(n, 3)).astype(np.float32)
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.0015])
+def test_predicates_never_claim_what_float64_denies(rt, jitter):
+    v, tri = wavy_grid(jitter)
+    points, dirs = near_surface(v, tri, 6000, seed=2)
+    got = predicates(rt, v, tri, points, dirs)
+    g, slope = steepest_slope(v, tri), got["slope"]
+    p, dd = points.astype(np.float64), dirs.astype(np.float64)
+    h32 = surface_height(v, tri, p[:, [0, 2]])   # under the float32 point as stored
+    run = np.hypot(dd[:, 0], dd[:, 2])
     # never wrong
-    assert np.all(~over | (p[:, 1] > h32))
-    dd = dirs.astype(np.float64)
-    horizontal = np.hypot(dd[:, 0], dd[:, 2])
     assert g <= slope <= 1.5 * g
-    assert np.all(~climbs | (dd[:, 1] > slope * horizontal))
-    # and right where it is clear: every ray rising 0.1% faster than the bound, and the points
-    # over the surface by more than 1e-5, in a cell, away from its edges and its diagonal
-    fast = dd[:, 1] > 1.001 * slope * horizontal
-    assert fast.sum() > 1000 and climbs[fast].all()
+    assert np.all(~got["climbs"] | (dd[:, 1] > slope * run))
+    assert np.all(~got["sinks"] | (-dd[:, 1] > slope * run))
+    assert np.all((got["side"] != 1) | (p[:, 1] > h32))
+    assert np.all((got["side"] != -1) | (p[:, 1] < h32))
+    # and right where it is clear: every ray rising or sinking 0.1% faster than the bound, and
+    # the points over or under the surface by more than 1e-5, in a cell, away from its edges
+    # and its diagonal
+    for name, fast in (("climbs", dd[:, 1] > 1.001 * slope * run),
+                       ("sinks", -dd[:, 1] > 1.001 * slope * run)):
+        assert fast.sum() > 1000 and got[name][fast].all()
     cell = (p[:, [0, 2]] + 1) * (N - 1) / 2
     frac = cell - np.floor(cell)
     inner = (((frac > 0.02) & (frac < 0.98)).all(1) & (np.abs(frac.sum(1) - 1) > 0.03)
              & (cell > 0).all(1) & (cell < N - 1).all(1))
-    clear = inner & (p[:, 1] - h32 > 1e-5)
-    assert clear.sum() > 1000 and over[clear].all()
+    for side, clear in ((1, inner & (p[:, 1] - h32 > 1e-5)), (-1, inner & (h32 - p[:, 1] > 1e-5))):
+        assert clear.sum() > 1000 and (got["side"][clear] == side).all()
+    # unreachable: exactly the rays that climb from over it or sink from under it (or from
+    # over or under the grid's box)
+    hf_lo, hf_hi = v[:, 1].min(), v[:, 1].max()
+    want = ((got["climbs"] & ((p[:, 1] > hf_hi) | (got["side"] == 1)))
+            | (got["sinks"] & ((p[:, 1] < hf_lo) | (got["side"] == -1))))
+    assert np.array_equal(got["unreachable"], want) and want.mean() > 0.1
+
+
+def test_unreachable_rays_meet_nothing_and_walks_keep_the_bvh_hits(binary_rt):
+    """The rays hf_unreachable culls cross nothing (float64 brute force), and the walk, which
+    culls them, still gives the BVH's hits for rays from near the surface both ways."""
+    v, tri = wavy_grid()
+    points, dirs = near_surface(v, tri, 1500, seed=5)
+    got = predicates(binary_rt, v, tri, points, dirs)
+    culled = got["unreachable"]
+    assert culled.sum() > 150
+    assert np.all(crossings(v, tri, points.astype(np.float64)[culled],
+                            dirs.astype(np.float64)[culled]) == 0)
+    walk, bvh = scenes(binary_rt, v, tri, N)
+    tmax = np.full(len(points), np.inf)
+    hits = trace(walk, points, dirs, tmax, False)
+    assert_identical(hits, trace(bvh, points, dirs, tmax, False))
+    assert (hits["inst"][culled] != 0).all() and (hits["inst"][~culled] == 0).any()
 
 
 # -- frames with and without it -----------------------------------------------------------
@@ -238,3 +278,21 @@ def test_the_pool_frame_is_the_same_with_fewer_walks(rt_count):
     assert np.array_equal(on, off)
     assert c_on["hits"] == c_off["hits"] > 0
     assert c_on["traversals"] <= 0.4 * c_off["traversals"]
+
+
+def test_frames_are_the_same_without_the_walks_cull(rt):
+    """hf_unreachable in every walk (HF_CULL_UNREACHABLE, traverse_heightfield.h): the
+    reflections and refractions off the water, its shadow rays and the pool's caustic photons
+    give the same frames as a build that walks every ray."""
+    from app.world import World
+
+    walk_all = Runtime(rt.device, defines={"HF_CULL_UNREACHABLE": 0})
+    s = RenderSettings(width=28, height=20, bounces=3, coop_from=2, overlap_from=0)
+    (culled, *_), _ = frames(rt, HIGH_SUN, s)
+    (walked, *_), _ = frames(walk_all, HIGH_SUN, s)
+    assert np.array_equal(culled, walked)
+    pool = []
+    for r in (rt, walk_all):
+        w = World("scenes/pool.toml", r, width=48, height=27, cells=40)
+        pool.append([w.frame(1 / 30).copy() for _ in range(2)])
+    assert np.array_equal(np.array(pool[0]), np.array(pool[1]))
