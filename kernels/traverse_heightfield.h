@@ -111,8 +111,9 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
     if (!(ta <= tb)) return false;
 #if HF_CULL_UNREACHABLE
     /* a ray from the slab that rises from over the surface, or sinks from under it, faster
-       than its slopes (a reflection or refraction off the water, a shadow ray from it) */
-    if (hf_unreachable(hf, verts, o, d)) return false;
+       than its slopes (a reflection or refraction off the water, a shadow ray from it); one
+       from outside the slab that reached the box here may meet it (a camera ray) */
+    if (o.y >= lo.y && o.y <= hi.y && hf_unreachable(hf, verts, o, d)) return false;
 #endif
     const int nx = hf->nx, ny = hf->ny, nbx = hf->nbx;
     /* u along x (cells i) or along z (cells j): the axis the ray crosses more cells of */
