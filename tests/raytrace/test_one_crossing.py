@@ -1,10 +1,13 @@
-"""A shadow ray that climbs faster than the water's steepest slope crosses the height field at
-most once, upward (RenderSettings.one_crossing; kernels/heightfield.h: hf_climbs, hf_over).
-Checked here: that claim itself against a float64 brute force over every triangle; the two
-predicates against float64 (they never claim what is false, and they claim nearly all that is
-true away from a cell's edges); and frames with and without the shortcut, byte for byte, through
-every shadow kernel, with fewer walks where the sun climbs over the waves and the same walks where
-it does not. The bounds pass's slope against float64: tests/raytrace/test_heightfield.py."""
+"""A ray that rises faster than the water's steepest slope crosses the height field at most
+once, upward; one that sinks faster, at most once, downward (kernels/heightfield.h: hf_climbs,
+hf_sinks, hf_side, hf_unreachable). The shadow rays' crossings use it (RenderSettings.
+one_crossing), and every walk culls the rays that cannot meet the surface (HF_CULL_UNREACHABLE).
+Checked here: the claim itself against a float64 brute force over every triangle; the
+predicates against float64 (they never claim what is false, and they claim all that is clearly
+true away from a cell's edges); culled rays against the brute force and walks against the BVH;
+frames with and without each shortcut, byte for byte, through every shadow kernel, with fewer
+walks where the sun climbs over the waves and the same walks where it does not. The bounds
+pass's slope against float64: tests/raytrace/test_heightfield.py."""
 
 import dataclasses
 
