@@ -10,7 +10,8 @@
 # PART size: the baseline scene at 3840x2160 and the pool per depth, on and off.
 # PART cull: every walk of the height field culls the rays that cannot meet the surface
 #   (hf_unreachable; HF_CULL_UNREACHABLE 1) against a copy of the tree built with it 0: the
-#   device tests of test_one_crossing.py (test_heightfield.py too at ba368f1), then the baseline scene per depth and whole, the pool whole, in turns twice,
+#   device tests of test_one_crossing.py (test_heightfield.py too at ba368f1; CULL_TESTS=EXPR
+#   picks some with pytest -k), then the baseline scene per depth and whole, the pool whole, in turns twice,
 #   the pool per depth and the baseline scene at 3840x2160.
 # PART tune: the kernel choices tuned before the light buffer and one crossing, again: the
 #   baseline scene and the pool at 1920x1080 with the defaults (first and last) and with
@@ -46,7 +47,7 @@ cull)
         's/^#define HF_CULL_UNREACHABLE 1/#define HF_CULL_UNREACHABLE 0/' \
         kernels/traverse_heightfield.h
     timeout 300 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_one_crossing.py \
-        2>&1 | tail -3
+        -k "${CULL_TESTS:-not nothing}" 2>&1 | tail -3
     for rep in 1 2; do
         lb bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_cull_$rep" \
             | tail -1

@@ -1,11 +1,20 @@
 /* The height field's per-frame pass (raytrace.scene.Scene.update), in place of a BVH refit:
      heightfield_bounds   one launch, one work-item per HF_BLOCK x HF_BLOCK block of cells
    Reads each vertex of its block once ((HF_BLOCK + 1)^2 reads: block edges are shared) and
-   writes 8 bytes per block (its y range) and the grid's box and a bound on its slopes into the
-   HeightField record, and the box into the mesh's BvhInfo header, which the TLAS build reads as
+   writes 16 bytes per block (its y range and a bound on its slopes) and the grid's box and
+   slope bound into the HeightField record, and the box into the mesh's BvhInfo header, which the TLAS build reads as
    it reads a BLAS's root box. */
 #include "bvh.h"
 #include "heightfield.h"
+
+/* A bound on the slopes of the triangles whose x edges rise by at most rise_x and z edges by
+   rise_z: a triangle's slope over x is one x edge's step over dx (over z: a z edge's), up to
+   the off-grid tolerance, which HF_SLOPE_MARGIN covers. */
+inline float hf_slope_bound(float rise_x, float rise_z, float dx, float dz)
+{
+    const float sx = rise_x / fabs(dx), sz = rise_z / fabs(dz);
+    return HF_SLOPE_MARGIN * sqrt(sx * sx + sz * sz);
+}
 
 inline void hf_group_min_max(__local int* l, int lid, int* v, int is_max)
 {
@@ -19,12 +28,13 @@ inline void hf_group_min_max(__local int* l, int lid, int* v, int is_max)
     barrier(CLK_LOCAL_MEM_FENCE);
 }
 
-/* blocks[b] = (min y, max y) of the vertices of block b = bj * nbx + bi (cells [bi B, bi B + B)
-   x [bj B, bj B + B), vertices up to and including the far edge); the work-groups' boxes and
-   bad-vertex counts go through atomics on order-preserving ints, and the last group to finish
-   (a ticket after a global fence) writes the box and count and zeroes the scratch. */
+/* blocks[b] = (min y, max y, slope bound, 0) of block b = bj * nbx + bi (cells [bi B, bi B + B)
+   x [bj B, bj B + B), vertices up to and including the far edge; the bound as HeightField.slope
+   over the block's own edges); the work-groups' boxes, steps and bad-vertex counts go through
+   atomics on order-preserving ints, and the last group to finish (a ticket after a global
+   fence) writes the grid's box, slope bound and count and resets the scratch. */
 __kernel __attribute__((reqd_work_group_size(HF_WG, 1, 1)))
-void heightfield_bounds(__global const float4* restrict verts, __global float2* restrict blocks,
+void heightfield_bounds(__global const float4* restrict verts, __global float4* restrict blocks,
                         __global HeightField* hf, __global BvhInfo* restrict blas_infos)
 {
     __local int scratch[HF_WG];
@@ -71,7 +81,7 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
                 bhi = fmax(bhi, v.xyz);
             }
         }
-        blocks[b] = (float2)(ymin, ymax);
+        blocks[b] = (float4)(ymin, ymax, hf_slope_bound(rise_x, rise_z, dx, dz), 0.0f);
         lo[0] = float_to_ordered(blo.x);
         lo[1] = float_to_ordered(blo.y);
         lo[2] = float_to_ordered(blo.z);
@@ -114,11 +124,8 @@ void heightfield_bounds(__global const float4* restrict verts, __global float2* 
     box_hi.z = ordered_to_float(atomic_xchg(acc_hi + 2, INT_MIN));
     box_lo.w = box_hi.w = 0.0f;
     const int n_bad = atomic_xchg(&hf->acc_bad, 0);
-    /* a triangle's slope over x is one x edge's step over dx (over z: a z edge's), up to the
-       off-grid tolerance, which HF_SLOPE_MARGIN covers */
-    const float sx = ordered_to_float(atomic_xchg(&hf->acc_rise_x, INT_MIN)) / fabs(dx);
-    const float sz = ordered_to_float(atomic_xchg(&hf->acc_rise_z, INT_MIN)) / fabs(dz);
-    hf->slope = HF_SLOPE_MARGIN * sqrt(sx * sx + sz * sz);
+    hf->slope = hf_slope_bound(ordered_to_float(atomic_xchg(&hf->acc_rise_x, INT_MIN)),
+                               ordered_to_float(atomic_xchg(&hf->acc_rise_z, INT_MIN)), dx, dz);
     hf->lo = box_lo;
     hf->hi = box_hi;
     hf->x0 = v00.x;

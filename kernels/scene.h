@@ -16,11 +16,12 @@
    blas_tris  : every mesh's triangles in one array, in leaf order (wide: in blocks);
    hf_info, hf_vertices, hf_blocks: the scene's height field (heightfield.h; hf_info->mesh is
                 HF_NONE without one): its record, its vertices (the writer's buffer) and the y
-                range of each block of its cells;
+                range and slope bound of each block of its cells;
    trace_stats: [0] counts traversal-stack overflows (never expected: the stack is deeper than
                 any tree the builder can make; a non-zero count means hits may be missing);
                 [1] counts cooperative walks redone serially (TRACE_STAT_COOP_REDO);
-                the work counters of TRACE_COUNT builds follow (TRACE_STAT_COUNT). */
+                [2], [3] and, from TRACE_STAT_COUNT, the work counters of TRACE_COUNT
+                builds follow. */
 /* TRACE_WIDE picks the BLAS layout the kernels read; the host passes it (kernels.runtime adds
    the runtime's layout to every build, raytrace.scene.Scene.trace_defines names the scene's):
    0: binary nodes (BvhNode) and leaf-ordered triangles (BvhTri), the GPU layout;
@@ -41,7 +42,7 @@
     __global const int* restrict tlas_prims, __global const Instance* restrict instances,       \
     __global const BLAS_NODE* restrict blas_nodes, __global const BLAS_PRIM* restrict blas_tris, \
     __global const HeightField* restrict hf_info, __global const float4* restrict hf_vertices,  \
-    __global const float2* restrict hf_blocks, __global int* restrict trace_stats
+    __global const float4* restrict hf_blocks, __global int* restrict trace_stats
 
 #define SCENE_ARGS                                                                             \
     tlas_info, tlas_nodes, tlas_prims, instances, blas_nodes, blas_tris, hf_info, hf_vertices,  \
@@ -51,6 +52,10 @@
 /* rays of the cooperative walk (traverse_coop.h) traced again serially because its local stack
    was full: never wrong, only slower */
 #define TRACE_STAT_COOP_REDO 1
+/* TRACE_COUNT builds: height-field walks culled whole, and spans a walk skipped, because the
+   ray departs from the surface faster than its slopes (traverse_heightfield.h) */
+#define TRACE_STAT_HF_CULLED 2
+#define TRACE_STAT_HF_SKIPPED 3
 /* Traversal work counters, written only by TRACE_COUNT=1 builds (a debug define, traverse.h;
    raytrace.scene.Scene.trace_counts reads them): per ray kind, TRACE_COUNT_FIELDS uint sums
    from TRACE_STAT_COUNT, then per kind the BLAS nodes visited per instance (ids above

@@ -500,7 +500,8 @@ TRACE_INLINE bool trace_instance(SCENE_PARAMS, int id, int hf_mesh, float3 org, 
     uint before = work[TRACE_CNT_BLAS];
 #endif
     bool got = ins->mesh == hf_mesh
-        ? trace_heightfield(hf_info, hf_vertices, hf_blocks, &lr, oo, od, tmin, tmax, hit, id, any)
+        ? trace_heightfield(hf_info, hf_vertices, hf_blocks, &lr, oo, od, tmin, tmax, hit, id, any,
+                            trace_stats)
         : trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, tmax, hit, id, any, trace_stats,
                      work);
 #if TRACE_COUNT

@@ -201,7 +201,7 @@ TRACE_INLINE bool trace_scene_coop_walk(SCENE_PARAMS, __local TraceCoop* coop, f
                     hh.inst = -1;
                     float hmax = trace_coop_tri_max(b, tmax);
                     if (!trace_heightfield(hf_info, hf_vertices, hf_blocks, &hr, oo, od, tmin,
-                                           &hmax, &hh, id, any))
+                                           &hmax, &hh, id, any, trace_stats))
                         continue;
                     if (trace_coop_before(hh.t, id, hh.prim, pt, pinst, pprim)) {
                         pt = hh.t;

@@ -5,9 +5,10 @@
    triangles are tested only when the ray's height over the column meets the cell's y range.
    Columns go HF_BLOCK at a time: a span whose blocks' y ranges the ray misses is skipped whole,
    so a ray crosses the grid's slab in a few steps where the water is flat. A ray that starts
-   in the slab and cannot meet the surface (hf_unreachable: over it and rising faster than its
-   slopes, or under it and sinking faster; the water's reflections, refractions and shadow
-   rays, as a rule) walks nothing.
+   in the slab and departs from the surface (over it and rising, under it and sinking; the
+   water's reflections, refractions and shadow rays, as a rule) faster than every slope walks
+   nothing, and faster than the slopes of a span's blocks skips that span, up to the first span
+   it walks (heightfield.h: hf_climbs, hf_side; the blocks' slope bounds).
 
    Every range has a margin of HF_EPS cells, wider than the rounding of the ray's cell
    coordinates and the grid's own tolerance (HF_GRID_TOL), so no triangle the ray hits is left
@@ -97,9 +98,9 @@ TRACE_INLINE float2 hf_heights(float oy, float dy, float t0, float t1)
    test; o, d: its origin and direction. */
 TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
                                     __global const float4* restrict verts,
-                                    __global const float2* restrict blocks, const TraceRay* r,
+                                    __global const float4* restrict blocks, const TraceRay* r,
                                     float3 o, float3 d, float tmin, float* tmax, Hit* hit, int inst,
-                                    bool any)
+                                    bool any, __global int* restrict stats)
 {
     /* the grid's box: entry ta and exit tb (NaN-safe as trace_box) */
     const float3 lo = hf->lo.xyz, hi = hf->hi.xyz;
@@ -110,10 +111,27 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
     const float tb = TRACE_MIN(tf.x, TRACE_MIN(tf.y, TRACE_MIN(tf.z, *tmax)));
     if (!(ta <= tb)) return false;
 #if HF_CULL_UNREACHABLE
-    /* a ray from the slab that rises from over the surface, or sinks from under it, faster
-       than its slopes (a reflection or refraction off the water, a shadow ray from it); one
-       from outside the slab that reached the box here may meet it (a camera ray) */
-    if (o.y >= lo.y && o.y <= hi.y && hf_unreachable(hf, verts, o, d)) return false;
+    /* A ray from the slab that departs from the surface (over it and rising, under it and
+       sinking: a reflection or refraction off the water, a shadow ray from it) faster than
+       every slope meets nothing; faster than a span's blocks slope, it meets nothing there and
+       stays on its side (clear: 1, -1 while its side is not looked up), up to the first span
+       it walks. One from outside the slab that reached the box here may meet it (a camera
+       ray); one whose walk starts past its origin (tmin > 0) may have crossed before. */
+    int clear = 0;
+    if (o.y >= lo.y && o.y <= hi.y && d.y != 0.0f && tmin <= 0.0f) {
+        if (hf_climbs(hf, d) || hf_sinks(hf, d)) {
+            const int side = hf_side(hf, verts, o);
+            if (side != 0 && (side > 0) == (d.y > 0.0f)) {
+#if TRACE_COUNT
+                atomic_inc(stats + TRACE_STAT_HF_CULLED);
+#endif
+                return false;
+            }
+        } else {
+            clear = -1;
+        }
+    }
+    const float run = 1.0001f * sqrt(d.x * d.x + d.z * d.z);
 #endif
     const int nx = hf->nx, ny = hf->ny, nbx = hf->nbx;
     /* u along x (cells i) or along z (cells j): the axis the ray crosses more cells of */
@@ -143,10 +161,25 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
         hf_rows(w_o, w_d, t0, t1, nw, &r0, &r1);
         float2 y = hf_heights(o.y, d.y, t0, t1);
         bool meets = false;
-        for (int br = r0 / HF_BLOCK; br <= r1 / HF_BLOCK && !meets; ++br) {
-            const float2 by = blocks[ux ? br * nbx + block_u : block_u * nbx + br];
-            meets = by.y >= y.x && by.x <= y.y;
+        float steep = 0.0f;
+        for (int br = r0 / HF_BLOCK; br <= r1 / HF_BLOCK; ++br) {
+            const float4 by = blocks[ux ? br * nbx + block_u : block_u * nbx + br];
+            meets = meets || (by.y >= y.x && by.x <= y.y);
+            steep = fmax(steep, by.z);
         }
+#if HF_CULL_UNREACHABLE
+        if (meets && clear != 0 && fabs(d.y) > steep * run) {
+            if (clear < 0) {
+                const int side = hf_side(hf, verts, o);
+                clear = side != 0 && (side > 0) == (d.y > 0.0f);
+            }
+            meets = clear == 0;
+#if TRACE_COUNT
+            if (!meets) atomic_inc(stats + TRACE_STAT_HF_SKIPPED);
+#endif
+        }
+        if (meets) clear = 0;
+#endif
         if (meets) {
             for (int c = s0;; c += step) {
                 hf_span(u_o, u_d, c, c, ta, tb, &t0, &t1);

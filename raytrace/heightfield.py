@@ -4,7 +4,8 @@ A mesh added with ``Scene.add_mesh(..., grid=(nx, ny))`` is an ``nx x ny`` verte
 ``(i, j)`` at index ``j*nx + i`` lying at ``x0 + i dx, z0 + j dz`` in object space (``y`` free),
 with the triangles of ``lbm.grid_triangles`` (quad ``q = j*(nx-1) + i``: triangles ``2q`` and
 ``2q+1``). Its per-frame pass, ``heightfield_bounds`` (``kernels/heightfield.cl``), writes the
-y range of every 8 x 8 block of cells and the grid's box: one launch reading the vertices once,
+y range and a slope bound of every 8 x 8 block of cells and the grid's box and slope bound: one
+launch reading the vertices once,
 in place of a BVH refit (several launches, about 100 B of nodes and leaf triangles per
 triangle). Rays walk its cells (``kernels/traverse_heightfield.h``) and get the BVH's hit bit
 for bit. The kernels read the vertex buffer the writer fills: no copy.
@@ -75,7 +76,7 @@ class HeightField:
         self.mesh: int | None = None
         self.nx = self.ny = 0
         self.record = rt.to_device(self._record(HF_NONE, 2, 2))
-        self.blocks = rt.buffer(8)
+        self.blocks = rt.buffer(16)
         self._vertices = rt.buffer(16)
         self._bounds = None
 
@@ -96,7 +97,7 @@ class HeightField:
         self.mesh, self.nx, self.ny = int(mesh), int(nx), int(ny)
         self.record = self.rt.to_device(self._record(self.mesh, self.nx, self.ny))
         nbx, nby = grid_blocks(nx, ny)
-        self.blocks = self.rt.buffer(8 * nbx * nby)
+        self.blocks = self.rt.buffer(16 * nbx * nby)
         self._bounds = self.rt.kernel_launcher("heightfield.cl", "heightfield_bounds",
                                                stage=f"{self.stage}.heightfield")
         wg = HF_WG
@@ -119,6 +120,6 @@ class HeightField:
         return self.rt.to_host(self.record, HEIGHTFIELD_DTYPE, 1)[0]
 
     def read_blocks(self) -> np.ndarray:
-        """(nby, nbx, 2) float32 (min y, max y) per block (synchronises)."""
+        """(nby, nbx, 4) float32 (min y, max y, slope bound, 0) per block (synchronises)."""
         nbx, nby = grid_blocks(self.nx, self.ny)
-        return self.rt.to_host(self.blocks, np.float32, 2 * nbx * nby).reshape(nby, nbx, 2)
+        return self.rt.to_host(self.blocks, np.float32, 4 * nbx * nby).reshape(nby, nbx, 4)

@@ -45,6 +45,9 @@ MASK_ALL = 0xFFFFFFFF
 TRACE_STAT_OVERFLOW = 0
 #: Rays of the cooperative walk redone serially, its stack full (kernels/traverse_coop.h).
 TRACE_STAT_COOP_REDO = 1
+#: TRACE_COUNT builds: height-field walks culled whole and spans skipped by the slopes.
+TRACE_STAT_HF_CULLED = 2
+TRACE_STAT_HF_SKIPPED = 3
 #: The traversal work counters of TRACE_COUNT builds (kernels/scene.h): ray kinds and fields.
 TRACE_KINDS = ("query", "primary", "secondary", "shadow", "photon", "crossing")
 TRACE_COUNT_FIELDS = ("rays", "traversals", "tlas_nodes", "blas_entries", "blas_nodes",
@@ -473,16 +476,18 @@ class Scene:
 
     # -- traversal work (TRACE_COUNT builds) ------------------------------------------------
     def reset_trace_counts(self) -> None:
-        """Zero the work counters (the overflow guard stays)."""
-        n = TRACE_STATS_LEN - TRACE_STAT_COUNT
+        """Zero the work counters (the overflow and redo guards stay)."""
+        n = TRACE_STATS_LEN - TRACE_STAT_HF_CULLED
         cl.enqueue_fill_buffer(self.rt.queue, self.trace_stats, np.uint32(0),
-                               4 * TRACE_STAT_COUNT, 4 * n)
+                               4 * TRACE_STAT_HF_CULLED, 4 * n)
 
     def trace_counts(self) -> dict:
         """The work counters since the last reset, per ray kind: ``{kind: {field: n}}`` with
         the fields of :data:`TRACE_COUNT_FIELDS` and ``blas_nodes_by_instance`` (a list; ids
-        past the last slot share it). All zero unless the kernels were built with
-        ``TRACE_COUNT=1`` (``Runtime(defines={"TRACE_COUNT": 1})``). Synchronises."""
+        past the last slot share it), and ``heightfield``: its walks culled whole and spans
+        skipped by the slopes (kernels/traverse_heightfield.h). All zero unless the kernels
+        were built with ``TRACE_COUNT=1`` (``Runtime(defines={"TRACE_COUNT": 1})``).
+        Synchronises."""
         st = self.rt.to_host(self.trace_stats, np.uint32, TRACE_STATS_LEN)
         nf = len(TRACE_COUNT_FIELDS)
         out = {}
@@ -492,6 +497,8 @@ class Scene:
             ib = TRACE_STAT_INST + k * TRACE_COUNT_INST
             rec["blas_nodes_by_instance"] = [int(x) for x in st[ib:ib + TRACE_COUNT_INST]]
             out[kind] = rec
+        out["heightfield"] = {"culled": int(st[TRACE_STAT_HF_CULLED]),
+                              "skipped_spans": int(st[TRACE_STAT_HF_SKIPPED])}
         return out
 
     # -- kernels' view ----------------------------------------------------------------------

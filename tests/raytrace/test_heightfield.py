@@ -268,13 +268,19 @@ def test_bounds_pass_equals_numpy(rt):
         assert rec["x0"] == x[0] and rec["z0"] == z[0]
         blocks = scene.heightfield.read_blocks()
         nbx, nby = grid_blocks(n, m)
-        assert blocks.shape == (nby, nbx, 2)
+        assert blocks.shape == (nby, nbx, 4)
+        grid_v = v.reshape(m, n, 3)
         for bj in range(nby):
             for bi in range(nbx):
-                ys = Y[bj * HF_BLOCK:bj * HF_BLOCK + HF_BLOCK + 1,
-                       bi * HF_BLOCK:bi * HF_BLOCK + HF_BLOCK + 1]
+                rows = slice(bj * HF_BLOCK, bj * HF_BLOCK + HF_BLOCK + 1)
+                cols = slice(bi * HF_BLOCK, bi * HF_BLOCK + HF_BLOCK + 1)
+                ys = Y[rows, cols]
                 assert blocks[bj, bi, 0] == ys.min() and blocks[bj, bi, 1] == ys.max()
-        assert rec["slope"] == pytest.approx(slope_bound(v, n, m), rel=1e-5)
+                assert blocks[bj, bi, 2] == pytest.approx(
+                    slope_bound(grid_v[rows, cols], *grid_spacing(v, n, m)), rel=1e-5)
+                assert blocks[bj, bi, 3] == 0
+        assert rec["slope"] == pytest.approx(
+            slope_bound(v.reshape(m, n, 3), *grid_spacing(v, n, m)), rel=1e-5)
         assert steepest_slope(v, tri) <= rec["slope"] <= 1.5 * steepest_slope(v, tri)
         assert rec["acc_rise_x"] == rec["acc_rise_z"] == np.iinfo(np.int32).min
     assert scene.check() == {"overflows": 0, "bad_triangles": 0}
@@ -287,14 +293,19 @@ def steepest_slope(v, tri) -> float:
     return float(np.max(np.hypot(n[:, 0], n[:, 2]) / np.abs(n[:, 1])))
 
 
-def slope_bound(v, nx, ny) -> float:
-    """float64: HeightField.slope of an nx x ny grid, the margin times the hypotenuse of the
-    largest height steps along x and along z over the spacings (from the corners)."""
+def grid_spacing(v, nx, ny) -> tuple[float, float]:
+    """float64 dx, dz of an nx x ny grid, from its corners (as the bounds pass takes them)."""
     g = v.astype(np.float64).reshape(ny, nx, 3)
-    dx = (g[0, -1, 0] - g[0, 0, 0]) / (nx - 1)
-    dz = (g[-1, 0, 2] - g[0, 0, 2]) / (ny - 1)
-    sx = np.abs(np.diff(g[..., 1], axis=1)).max() / abs(dx)
-    sz = np.abs(np.diff(g[..., 1], axis=0)).max() / abs(dz)
+    return (g[0, -1, 0] - g[0, 0, 0]) / (nx - 1), (g[-1, 0, 2] - g[0, 0, 2]) / (ny - 1)
+
+
+def slope_bound(patch, dx, dz) -> float:
+    """float64: the bounds pass's slope bound over a (rows, cols, 3) patch of grid vertices
+    (the whole grid: HeightField.slope; a block's: its blocks[...].z), the margin times the
+    hypotenuse of the largest height steps along x and along z over the spacings."""
+    y = patch[..., 1].astype(np.float64)
+    sx = np.abs(np.diff(y, axis=1)).max(initial=0.0) / abs(dx)
+    sz = np.abs(np.diff(y, axis=0)).max(initial=0.0) / abs(dz)
     return HF_SLOPE_MARGIN * float(np.hypot(sx, sz))
 
 
@@ -319,7 +330,8 @@ def test_bad_vertices_are_reported(rt, fault):
     if fault == "nan":
         assert rec["slope"] == np.inf
     else:
-        assert rec["slope"] == pytest.approx(slope_bound(v, n, n), rel=1e-5)
+        assert rec["slope"] == pytest.approx(
+            slope_bound(v.reshape(n, n, 3), *grid_spacing(v, n, n)), rel=1e-5)
     with pytest.raises(ValueError, match="1 grid vertices are NaN, infinite or off"):
         scene.check()
 

@@ -299,3 +299,30 @@ def test_frames_are_the_same_without_the_walks_cull(rt):
         w = World("scenes/pool.toml", r, width=48, height=27, cells=40)
         pool.append([w.frame(1 / 30).copy() for _ in range(2)])
     assert np.array_equal(np.array(pool[0]), np.array(pool[1]))
+
+
+def test_a_steep_spot_leaves_the_rest_of_the_walk_skipping_spans(rt):
+    """Gentle waves with one steep spike: few rays depart faster than the grid's steepest
+    slope (culled whole: the nearly vertical ones), but a walk skips the spans whose blocks
+    slope less than it rises or sinks (the blocks' bounds), with the hits of the BVH and of a
+    build that walks every span."""
+    counting = Runtime(rt.device, bvh_layout="binary", defines={"TRACE_COUNT": 1})
+    n = 65
+    v, tri = height_field_grid(n, 0.4)
+    v = v.copy()
+    v[:, 1] *= 0.1
+    v[32 * n + 40, 1] += 0.3   # a spike: slopes near 10 around it
+    points, dirs = near_surface(v, tri, 3000, seed=7)
+    walk, bvh = scenes(counting, v, tri, n)
+    assert walk.heightfield.read()["slope"] > 5
+    tmax = np.full(len(points), np.inf)
+    walk.reset_trace_counts()
+    hits = trace(walk, points, dirs, tmax, False)
+    counts = walk.trace_counts()["heightfield"]
+    assert counts["skipped_spans"] > 500 and counts["culled"] < 0.01 * len(points)
+    assert_identical(hits, trace(bvh, points, dirs, tmax, False))
+    every = Runtime(rt.device, bvh_layout="binary", defines={"HF_CULL_UNREACHABLE": 0})
+    walked, _ = scenes(every, v, tri, n)
+    again = trace(walked, points, dirs, tmax, False)
+    for field in ("t", "u", "v", "prim", "inst"):
+        assert np.array_equal(hits[field], again[field]), field

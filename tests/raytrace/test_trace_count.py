@@ -7,6 +7,7 @@ import pytest
 
 from app.meshes import height_field_grid
 from raytrace import RayQuery, Scene
+from raytrace import scene as scene_module
 from raytrace.bvh import HIT_DTYPE
 from raytrace.query import intersect_reference, pack_rays
 from raytrace.scene import TRACE_KINDS
@@ -87,3 +88,12 @@ def test_any_hit_visits_no_more_than_closest_hit(rt):
     # both walk the same nodes up to the first hit; closest-hit goes on to prove it closest
     assert ca["query"]["blas_nodes"] < cc["query"]["blas_nodes"]
     assert ca["query"]["tri_tests"] <= cc["query"]["tri_tests"]
+
+
+def test_stat_slots_match_the_header():
+    from kernels.runtime import KERNEL_DIR
+
+    text = (KERNEL_DIR / "scene.h").read_text()
+    for name in ("TRACE_STAT_OVERFLOW", "TRACE_STAT_COOP_REDO", "TRACE_STAT_HF_CULLED",
+                 "TRACE_STAT_HF_SKIPPED", "TRACE_STAT_COUNT"):
+        assert f"#define {name} {getattr(scene_module, name)}\n" in text, name
