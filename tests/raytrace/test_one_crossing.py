@@ -326,3 +326,38 @@ def test_a_steep_spot_leaves_the_rest_of_the_walk_skipping_spans(rt):
     again = trace(walked, points, dirs, tmax, False)
     for field in ("t", "u", "v", "prim", "inst"):
         assert np.array_equal(hits[field], again[field]), field
+
+
+def test_a_walk_that_starts_past_its_origin_keeps_the_bvh_hits(rt):
+    """tmin > 0: the ray may have crossed the surface before its walk starts, so the side of
+    its origin says nothing there. A cliff up to a flat plateau: rays from over the low ground
+    rise into the cliff and, past it, cross the plateau from under it inside a gentle block,
+    their walks starting there; and random rays over the spiky grid. The hits are the BVH's."""
+    from raytrace import RayQuery
+    from raytrace.bvh import HIT_DTYPE
+    from raytrace.query import pack_rays
+
+    binary = Runtime(rt.device, bvh_layout="binary")
+    n = 65   # cells of 1/32 over [-1, 1]: blocks of 0.25
+    v, tri = height_field_grid(n, 0.0)
+    v = v.copy()
+    v[:, 1] = np.where(v[:, 0] > 0.01, 0.2, 0.0)   # the cliff in the block [0, 0.25]
+    k = 40
+    cliff_o = np.c_[np.full(k, -0.3), np.full(k, 0.01), np.linspace(0.65, 0.9, k)]  # clear of
+    # the box and sphere beside the grid (scenes)
+    cliff_d = np.tile([1.0, 0.3, 0.0], (k, 1))   # at x = 0.26 (tmin) under the plateau
+    points, dirs = near_surface(v, tri, 2000, seed=9)
+    o = np.concatenate([cliff_o, points])
+    d = np.concatenate([cliff_d, dirs])
+    tmin = np.concatenate([np.full(k, 0.56), np.random.default_rng(9).uniform(0, 0.3, 2000)])
+    out = []
+    for scene in scenes(binary, v, tri, n)[:2]:
+        ro, rd = pack_rays(o, d, tmin, np.inf)
+        hits = binary.buffer(HIT_DTYPE.itemsize * len(ro))
+        RayQuery(scene, binary.to_device(ro), binary.to_device(rd), hits, len(ro)).enqueue()
+        out.append(binary.to_host(hits, HIT_DTYPE, len(ro)))
+    walk, bvh = out
+    assert_identical(walk, bvh)
+    # the cliff's rays meet the plateau from under it at x = 1/3
+    assert (walk["inst"][:k] == 0).all()
+    assert np.allclose(o[:k, 0] + walk["t"][:k] * d[:k, 0], 1 / 3, atol=1e-4)
