@@ -5,10 +5,10 @@ A mesh added with ``Scene.add_mesh(..., grid=(nx, ny))`` is an ``nx x ny`` verte
 with the triangles of ``lbm.grid_triangles`` (quad ``q = j*(nx-1) + i``: triangles ``2q`` and
 ``2q+1``). Its per-frame pass, ``heightfield_bounds`` (``kernels/heightfield.cl``), writes the
 y range and a slope bound of every 8 x 8 block of cells and the grid's box and slope bound: one
-launch reading the vertices once,
-in place of a BVH refit (several launches, about 100 B of nodes and leaf triangles per
-triangle). Rays walk its cells (``kernels/traverse_heightfield.h``) and get the BVH's hit bit
-for bit. The kernels read the vertex buffer the writer fills: no copy.
+launch reading the vertices once, in place of a BVH refit (several launches, about 100 B of
+nodes and leaf triangles per triangle). Rays walk its cells (``kernels/traverse_heightfield.h``)
+and get the BVH's hit bit for bit; a ray that departs from the surface faster than the slopes
+skips what it cannot meet. The kernels read the vertex buffer the writer fills: no copy.
 """
 
 from __future__ import annotations
