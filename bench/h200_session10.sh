@@ -13,6 +13,7 @@
 #   device tests of test_one_crossing.py (test_heightfield.py too at ba368f1; CULL_TESTS=EXPR
 #   picks some with pytest -k), then the baseline scene per depth and whole, the pool whole, in turns twice,
 #   the pool per depth and the baseline scene at 3840x2160.
+# PART cull-pocl: the same A/B on PoCL (this machine's CPUs), small sizes.
 # PART tune: the kernel choices tuned before the light buffer and one crossing, again: the
 #   baseline scene and the pool at 1920x1080 with the defaults (first and last) and with
 #   --cost-bins off, --overlap-from 0 and 2, --coop-from 1 and 3.
@@ -63,6 +64,20 @@ cull)
         | tail -1
     lb bench frame $k $static --out "$out/static4k_cull" | tail -1
     in_tree /tmp/walkall bench frame $k $static --out "$out/static4k_walkall" | tail -1
+    ;;
+cull-pocl)
+    # the same A/B on a CPU (PoCL), small: 128 cells, 480x270, 6 frames
+    variant_tree /tmp/walkall \
+        's/^#define HF_CULL_UNREACHABLE 1/#define HF_CULL_UNREACHABLE 0/' \
+        kernels/traverse_heightfield.h
+    small="--cells 128 --size 480 270 --frames 6"
+    for rep in 1 2; do
+        lb bench frame $small $static --out "$out/pocl_static_cull_$rep" | tail -1
+        in_tree /tmp/walkall bench frame $small $static --out "$out/pocl_static_walkall_$rep" \
+            | tail -1
+        lb bench frame $small --out "$out/pocl_pool_cull_$rep" | tail -1
+        in_tree /tmp/walkall bench frame $small --out "$out/pocl_pool_walkall_$rep" | tail -1
+    done
     ;;
 tune)
     for scene in static pool; do
