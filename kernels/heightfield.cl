@@ -2,8 +2,8 @@
      heightfield_bounds   one launch, one work-item per HF_BLOCK x HF_BLOCK block of cells
    Reads each vertex of its block once ((HF_BLOCK + 1)^2 reads: block edges are shared) and
    writes 16 bytes per block (its y range and a bound on its slopes) and the grid's box and
-   slope bound into the HeightField record, and the box into the mesh's BvhInfo header, which the TLAS build reads as
-   it reads a BLAS's root box. */
+   slope bound into the HeightField record, and the box into the mesh's BvhInfo header, which
+   the TLAS build reads as it reads a BLAS's root box. */
 #include "bvh.h"
 #include "heightfield.h"
 

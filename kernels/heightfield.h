@@ -108,14 +108,22 @@ inline int hf_side(__global const HeightField* restrict hf, __global const float
     return o.y > hmax + tol ? 1 : o.y < hmin - tol ? -1 : 0;
 }
 
+/* Whether o lies on the side of the surface that direction d leaves it toward: over it with
+   d rising, under it with d sinking (hf_side; false where the side is not known). */
+inline bool hf_departs(__global const HeightField* restrict hf,
+                       __global const float4* restrict verts, float3 o, float3 d)
+{
+    const int side = hf_side(hf, verts, o);
+    return side != 0 && (side > 0) == (d.y > 0.0f);
+}
+
 /* Whether the ray o + t d, t >= 0, cannot meet the surface: from over it rising faster than
    its slopes, or from under it sinking faster (trace_heightfield skips the walk then). */
 inline bool hf_unreachable(__global const HeightField* restrict hf,
                            __global const float4* restrict verts, float3 o, float3 d)
 {
-    if (hf_climbs(hf, d)) return o.y > hf->hi.y || hf_side(hf, verts, o) > 0;
-    if (hf_sinks(hf, d)) return o.y < hf->lo.y || hf_side(hf, verts, o) < 0;
-    return false;
+    if (!(hf_climbs(hf, d) || hf_sinks(hf, d))) return false;
+    return (d.y > 0.0f ? o.y > hf->hi.y : o.y < hf->lo.y) || hf_departs(hf, verts, o, d);
 }
 
 #endif

@@ -8,7 +8,7 @@
    in the slab and departs from the surface (over it and rising, under it and sinking; the
    water's reflections, refractions and shadow rays, as a rule) faster than every slope walks
    nothing, and faster than the slopes of a span's blocks skips that span, up to the first span
-   it walks (heightfield.h: hf_climbs, hf_side; the blocks' slope bounds).
+   it walks (heightfield.h: hf_climbs, hf_departs; the blocks' slope bounds).
 
    Every range has a margin of HF_EPS cells, wider than the rounding of the ray's cell
    coordinates and the grid's own tolerance (HF_GRID_TOL), so no triangle the ray hits is left
@@ -118,17 +118,14 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
        it walks. One from outside the slab that reached the box here may meet it (a camera
        ray); one whose walk starts past its origin (tmin > 0) may have crossed before. */
     int clear = 0;
-    if (o.y >= lo.y && o.y <= hi.y && d.y != 0.0f && tmin <= 0.0f) {
-        if (hf_climbs(hf, d) || hf_sinks(hf, d)) {
-            const int side = hf_side(hf, verts, o);
-            if (side != 0 && (side > 0) == (d.y > 0.0f)) {
-#if TRACE_COUNT
-                atomic_inc(stats + TRACE_STAT_HF_CULLED);
-#endif
-                return false;
-            }
-        } else {
+    if (o.y >= lo.y && o.y <= hi.y && tmin <= 0.0f) {
+        if (!(hf_climbs(hf, d) || hf_sinks(hf, d))) {
             clear = -1;
+        } else if (hf_departs(hf, verts, o, d)) {
+#if TRACE_COUNT
+            atomic_inc(stats + TRACE_STAT_HF_CULLED);
+#endif
+            return false;
         }
     }
     const float run = 1.0001f * sqrt(d.x * d.x + d.z * d.z);
@@ -169,10 +166,7 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
         }
 #if HF_CULL_UNREACHABLE
         if (meets && clear != 0 && fabs(d.y) > steep * run) {
-            if (clear < 0) {
-                const int side = hf_side(hf, verts, o);
-                clear = side != 0 && (side > 0) == (d.y > 0.0f);
-            }
+            if (clear < 0) clear = hf_departs(hf, verts, o, d);
             meets = clear == 0;
 #if TRACE_COUNT
             if (!meets) atomic_inc(stats + TRACE_STAT_HF_SKIPPED);
