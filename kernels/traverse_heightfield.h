@@ -28,6 +28,11 @@
 #ifndef HF_CULL_UNREACHABLE
 #define HF_CULL_UNREACHABLE 1
 #endif
+/* 1: with the cull, a walk from the surface skips the spans whose blocks slope less than the ray
+   departs, up to the first span it walks; 0: it walks them (the A/B: the same hits) */
+#ifndef HF_SKIP_SPANS
+#define HF_SKIP_SPANS HF_CULL_UNREACHABLE
+#endif
 
 /* The triangles of cell (i, j) if the ray's heights [ylo, yhi] meet the cell's. */
 TRACE_INLINE bool hf_cell(__global const float4* restrict verts, int nx, int i, int j,
@@ -117,7 +122,7 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
        stays on its side (clear: 1, -1 while its side is not looked up), up to the first span
        it walks. One from outside the slab that reached the box here may meet it (a camera
        ray); one whose walk starts past its origin (tmin > 0) may have crossed before. */
-    int clear = 0;
+    int clear = 0;   /* read only where HF_SKIP_SPANS */
     if (o.y >= lo.y && o.y <= hi.y && tmin <= 0.0f) {
         if (!(hf_climbs(hf, d) || hf_sinks(hf, d))) {
             clear = -1;
@@ -128,7 +133,9 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
             return false;
         }
     }
+#if HF_SKIP_SPANS
     const float run = 1.0001f * sqrt(d.x * d.x + d.z * d.z);
+#endif
 #endif
     const int nx = hf->nx, ny = hf->ny, nbx = hf->nbx;
     /* u along x (cells i) or along z (cells j): the axis the ray crosses more cells of */
@@ -164,7 +171,7 @@ TRACE_INLINE bool trace_heightfield(__global const HeightField* restrict hf,
             meets = meets || (by.y >= y.x && by.x <= y.y);
             steep = fmax(steep, by.z);
         }
-#if HF_CULL_UNREACHABLE
+#if HF_CULL_UNREACHABLE && HF_SKIP_SPANS
         if (meets && clear != 0 && fabs(d.y) > steep * run) {
             if (clear < 0) clear = hf_departs(hf, verts, o, d);
             meets = clear == 0;

@@ -326,6 +326,17 @@ def test_a_steep_spot_leaves_the_rest_of_the_walk_skipping_spans(rt):
     again = trace(walked, points, dirs, tmax, False)
     for field in ("t", "u", "v", "prim", "inst"):
         assert np.array_equal(hits[field], again[field]), field
+    # the cull without the span skip (HF_SKIP_SPANS 0): the same walks culled, no span skipped
+    no_skip = Runtime(rt.device, bvh_layout="binary",
+                      defines={"TRACE_COUNT": 1, "HF_SKIP_SPANS": 0})
+    spans_walked, _ = scenes(no_skip, v, tri, n)
+    spans_walked.reset_trace_counts()
+    again = trace(spans_walked, points, dirs, tmax, False)
+    no_skip_counts = spans_walked.trace_counts()["heightfield"]
+    assert no_skip_counts["skipped_spans"] == 0
+    assert no_skip_counts["culled"] == counts["culled"]
+    for field in ("t", "u", "v", "prim", "inst"):
+        assert np.array_equal(hits[field], again[field]), field
 
 
 def test_a_walk_that_starts_past_its_origin_keeps_the_bvh_hits(rt):

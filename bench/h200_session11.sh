@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-04 (eleventh session)" rows. Usage:
+#   bench/h200_session11.sh OUTDIR PART
+# PART skip: the height-field walk's span skip (HF_SKIP_SPANS) in the cooperative kernels of the
+#   tail levels, which the tenth session saw slower with it: the tree (cull and skip in every
+#   build) against copies whose TRACE_COOP=1 builds walk every span (coopnoskip) or cull
+#   nothing either (coopwalkall). Device tests first (SKIP_TESTS=EXPR picks some of
+#   test_one_crossing.py with pytest -k), then the baseline scene per depth and whole at
+#   1920x1080 in turns twice, and the pool whole once each.
+# PART where: where the baseline scene's shadow stage goes now, as a diagnosis only (the images
+#   are wrong): copies of the tree without the opaque query (light buffer and any-hit walk),
+#   without the crossings of the water, without both (the shading and the light loop alone),
+#   and returning once each hit is read; per depth, the tree first and last.
+# The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+set -uo pipefail
+out=${1:?OUTDIR}
+part=${2:?PART}
+mkdir -p "$out"
+source "$(dirname "$0")/h200_lib.sh"
+case $part in
+skip)
+    variant_tree /tmp/coopnoskip \
+        's/^#define HF_SKIP_SPANS HF_CULL_UNREACHABLE/#define HF_SKIP_SPANS (HF_CULL_UNREACHABLE \&\& !TRACE_COOP)/' \
+        kernels/traverse_heightfield.h
+    variant_tree /tmp/coopwalkall \
+        's/^#define HF_CULL_UNREACHABLE 1/#define HF_CULL_UNREACHABLE (!TRACE_COOP)/' \
+        kernels/traverse_heightfield.h
+    timeout 300 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_one_crossing.py \
+        -k "${SKIP_TESTS:-not nothing}" 2>&1 | tail -3
+    for rep in 1 2; do
+        lb bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_tree_$rep" \
+            | tail -1
+        for v in coopnoskip coopwalkall; do
+            in_tree /tmp/$v bench frame $f $static --per-depth --no-overlap \
+                --out "$out/static_pd_${v}_$rep" | tail -1
+        done
+        lb bench frame $f $static --out "$out/static_tree_$rep" | tail -1
+        for v in coopnoskip coopwalkall; do
+            in_tree /tmp/$v bench frame $f $static --out "$out/static_${v}_$rep" | tail -1
+        done
+    done
+    lb bench frame $f --out "$out/pool_tree" | tail -1
+    for v in coopnoskip coopwalkall; do
+        in_tree /tmp/$v bench frame $f --out "$out/pool_$v" | tail -1
+    done
+    ;;
+where)
+    noany='s/^    const int mapped = light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, org, dir, tmax);/    const int mapped = LB_CLEAR;/'
+    nocross='s/^    if (!prm->transmissive_shadows) return (float3)(1.0f);/    return (float3)(1.0f);/'
+    bare='s/^    if (h.prim < 0 || prm->n_lights == 0) return false;/    if (h.prim < 0 || prm->n_lights == 0 || h.prim >= 0) return false;/'
+    variant_tree /tmp/noany "$noany" kernels/render_shadow.h
+    variant_tree /tmp/nocross "$nocross" kernels/render_shadow.h
+    variant_tree /tmp/notrace "$noany" kernels/render_shadow.h "$nocross" kernels/render_shadow.h
+    variant_tree /tmp/bare "$bare" kernels/render_shadow.h
+    g="$f $static --per-depth --no-overlap"
+    lb bench frame $g --out "$out/static_tree_1" | tail -1
+    for v in noany nocross notrace bare; do
+        in_tree /tmp/$v bench frame $g --out "$out/static_$v" 2>&1 | tail -1
+    done
+    lb bench frame $g --out "$out/static_tree_2" | tail -1
+    ;;
+*)
+    echo "unknown PART $part" >&2
+    exit 2
+    ;;
+esac
