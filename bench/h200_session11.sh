@@ -11,10 +11,11 @@
 #   are wrong): copies of the tree without the opaque query (light buffer and any-hit walk),
 #   without the crossings of the water, without both (the shading and the light loop alone),
 #   and returning once each hit is read; per depth, the tree first and last.
-# PART lb: the light buffer's query reading a cell's slots beside its record (the tree) against
-#   reading them after its count (bench/patches/lb_slots_prefetch.patch reversed: nolbpre), and
-#   with the shadow ray's one-crossing set-up before the opaque query
-#   (bench/patches/shadow_hoist_crossing_setup.patch: hoist). Device tests first
+# PART lb: the light buffer's query reading a cell's slots beside its record
+#   (bench/patches/lb_slots_prefetch.patch: lbpre; the run in BENCHMARKS.md had it in the tree,
+#   at ec8a06f) against reading them after its count (the tree), and with the shadow ray's
+#   one-crossing set-up before the opaque query (bench/patches/shadow_hoist_crossing_setup.patch:
+#   hoist). Device tests first
 #   (test_light_buffer.py's answers and frames; the one-crossing frames), then the baseline
 #   scene per depth and whole at 1920x1080 in turns twice, and the pool whole once each.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
@@ -66,28 +67,28 @@ where)
     lb bench frame $g --out "$out/static_tree_2" | tail -1
     ;;
 lb)
-    variant_tree /tmp/nolbpre
-    (cd /tmp/nolbpre && patch -p1 -R -s < "$OLDPWD/bench/patches/lb_slots_prefetch.patch")
+    variant_tree /tmp/lbpre
+    (cd /tmp/lbpre && patch -p1 -s < "$OLDPWD/bench/patches/lb_slots_prefetch.patch")
     variant_tree /tmp/hoist
     (cd /tmp/hoist && patch -p1 -s < "$OLDPWD/bench/patches/shadow_hoist_crossing_setup.patch")
-    timeout 300 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_light_buffer.py \
-        -k "answers or frames_are" 2>&1 | tail -3
+    (cd /tmp/lbpre && timeout 300 python3 -m pytest -q -p no:cacheprovider \
+        tests/raytrace/test_light_buffer.py -k "answers or frames_are" 2>&1 | tail -1)
     (cd /tmp/hoist && timeout 200 python3 -m pytest -q -p no:cacheprovider \
         tests/raytrace/test_one_crossing.py -k "frames" 2>&1 | tail -1)
     for rep in 1 2; do
         lb bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_tree_$rep" \
             | tail -1
-        for v in nolbpre hoist; do
+        for v in lbpre hoist; do
             in_tree /tmp/$v bench frame $f $static --per-depth --no-overlap \
                 --out "$out/static_pd_${v}_$rep" | tail -1
         done
         lb bench frame $f $static --out "$out/static_tree_$rep" | tail -1
-        for v in nolbpre hoist; do
+        for v in lbpre hoist; do
             in_tree /tmp/$v bench frame $f $static --out "$out/static_${v}_$rep" | tail -1
         done
     done
     lb bench frame $f --out "$out/pool_tree" | tail -1
-    for v in nolbpre hoist; do
+    for v in lbpre hoist; do
         in_tree /tmp/$v bench frame $f --out "$out/pool_$v" | tail -1
     done
     ;;

@@ -14,9 +14,6 @@
 
 /* triangles a cell lists; a cell with more says "unknown" */
 #define LB_SLOTS 8
-#if LB_SLOTS != 8
-#error "light_buffer_blocked reads a cell's slots as one int8"
-#endif
 /* a triangle over more cells is rastered by a work-group (light_buffer_raster_big) */
 #define LB_SMALL_CELLS 32
 /* one over more cells by the whole launch */
@@ -65,20 +62,13 @@ inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* re
     if (!(cu >= 0.0f && cu < (float)m.n_u && cv >= 0.0f && cv < (float)m.n_v))
         return lb_cells[m.outside_cell].x ? LB_UNKNOWN : LB_CLEAR;
     const int cell = m.cell_base + (int)cv * m.n_u + (int)cu;
-    /* the slots beside the cell's record, with no wait on its count: most queries test a
-       triangle (an opaque surface's own points list it), and the two loads go out together */
     const int2 c = lb_cells[cell];
-    const int8 slot = vload8(0, lb_slots + cell * LB_SLOTS);
     if (c.x == 0 || dot(org, m.toward.xyz) > ordered_to_float(c.y)) return LB_CLEAR;
     if (c.x > LB_SLOTS) return LB_UNKNOWN;
-    const int slots[LB_SLOTS] = {slot.s0, slot.s1, slot.s2, slot.s3,
-                                 slot.s4, slot.s5, slot.s6, slot.s7};
     int inst = -1;
     TraceRay r;
-#pragma unroll
-    for (int k = 0; k < LB_SLOTS; ++k) {
-        if (k >= c.x) break;
-        const int t = slots[k];
+    for (int k = 0; k < c.x; ++k) {
+        const int t = lb_slots[cell * LB_SLOTS + k];
         const float4 p0 = lb_tris[3 * t], p1 = lb_tris[3 * t + 1], p2 = lb_tris[3 * t + 2];
         if (as_int(p0.w) != inst) {
             inst = as_int(p0.w);
