@@ -18,6 +18,10 @@
 #   hoist). Device tests first
 #   (test_light_buffer.py's answers and frames; the one-crossing frames), then the baseline
 #   scene per depth and whole at 1920x1080 in turns twice, and the pool whole once each.
+# PART fallback: a diagnosis (the images are wrong where a cell is full): the shadow kernels
+#   without the any-hit walk of the BVH that the light buffer's unknown cells fall back to
+#   (nofallback), against the tree, per depth in turns twice; then each one's registers and
+#   spills (bench/kernel_resources.py).
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -91,6 +95,21 @@ lb)
     for v in lbpre hoist; do
         in_tree /tmp/$v bench frame $f --out "$out/pool_$v" | tail -1
     done
+    ;;
+fallback)
+    variant_tree /tmp/nofallback \
+        's/trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW)/false/' \
+        kernels/render_shadow.h
+    g="$f $static --per-depth --no-overlap"
+    for rep in 1 2; do
+        lb bench frame $g --out "$out/static_pd_tree_$rep" | tail -1
+        in_tree /tmp/nofallback bench frame $g --out "$out/static_pd_nofallback_$rep" | tail -1
+    done
+    timeout 170 python3 bench/kernel_resources.py --scene $(echo $static | cut -d' ' -f2) \
+        --out "$out/resources_tree.json" | tail -1
+    (cd /tmp/nofallback && PYTHONPATH=/tmp/site:/tmp/nofallback timeout 170 python3 \
+        bench/kernel_resources.py --scene bench/scenes/pool_static_boat.toml \
+        --out "$out/resources_nofallback.json" | tail -1)
     ;;
 *)
     echo "unknown PART $part" >&2
