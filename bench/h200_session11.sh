@@ -22,6 +22,10 @@
 #   without the any-hit walk of the BVH that the light buffer's unknown cells fall back to
 #   (nofallback), against the tree, per depth in turns twice; then each one's registers and
 #   spills (bench/kernel_resources.py).
+# PART defer: the shadow rays whose light-buffer cell is full handed to a launch of their own
+#   (RenderSettings.defer_full_cells, --defer-full-cells on) against walked in place (off):
+#   its device tests, then the baseline scene per depth and whole at 1920x1080 in turns twice,
+#   at 3840x2160, and the pool whole.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -110,6 +114,26 @@ fallback)
     (cd /tmp/nofallback && PYTHONPATH=/tmp/site:/tmp/nofallback timeout 170 python3 \
         bench/kernel_resources.py --scene bench/scenes/pool_static_boat.toml \
         --out "$out/resources_nofallback.json" | tail -1)
+    ;;
+defer)
+    timeout 200 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_light_buffer.py \
+        -k "deferred" 2>&1 | tail -1
+    for rep in 1 2; do
+        for d in on off; do
+            lb bench frame $f $static --per-depth --no-overlap --defer-full-cells $d \
+                --out "$out/static_pd_defer${d}_$rep" | tail -1
+        done
+        for d in on off; do
+            lb bench frame $f $static --defer-full-cells $d --out "$out/static_defer${d}_$rep" \
+                | tail -1
+        done
+    done
+    for d in on off; do
+        lb bench frame $k $static --defer-full-cells $d --out "$out/static4k_defer$d" | tail -1
+    done
+    for d in on off; do
+        lb bench frame $f --defer-full-cells $d --out "$out/pool_defer$d" | tail -1
+    done
     ;;
 *)
     echo "unknown PART $part" >&2
