@@ -66,10 +66,6 @@ def add_arguments(p) -> None:
                    help="a shadow ray that climbs faster than the water's slopes crosses it at "
                         "most once: leave out the walks that can find nothing, or (off) walk "
                         "them (RenderSettings.one_crossing; the same image)")
-    p.add_argument("--defer-full-cells", choices=("on", "off"), default="on",
-                   help="with a light buffer, hand the shadow rays whose map cell is full (they "
-                        "walk the BVH) to a launch of their own, or (off) walk them in place "
-                        "(RenderSettings.defer_full_cells; the same image)")
     p.add_argument("--light-buffer", type=int, default=None, metavar="CELLS",
                    help="cells along each directional light's map of what blocks it "
                         "(RenderSettings.light_buffer: the shadow rays' any-hit query without a "
@@ -183,7 +179,6 @@ def run(args) -> int:
             world.renderer.set_cost_bins(bins_arg == "on")
         world.renderer.set_direct_crossings(getattr(args, "direct_crossings", "on") == "on")
         world.renderer.set_one_crossing(getattr(args, "one_crossing", "on") == "on")
-        world.renderer.set_defer_full_cells(getattr(args, "defer_full_cells", "on") == "on")
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -237,7 +232,6 @@ def run(args) -> int:
                "cost_bins": world.renderer.settings.cost_bins,
                "direct_crossings": world.renderer.settings.direct_crossings,
                "one_crossing": world.renderer.settings.one_crossing,
-               "defer_full_cells": world.renderer.settings.defer_full_cells,
                "light_buffer": world.renderer.settings.light_buffer,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,

@@ -23,9 +23,10 @@
 #   (nofallback), against the tree, per depth in turns twice; then each one's registers and
 #   spills (bench/kernel_resources.py).
 # PART defer: the shadow rays whose light-buffer cell is full handed to a launch of their own
-#   (RenderSettings.defer_full_cells, --defer-full-cells on) against walked in place (off):
-#   its device tests, then the baseline scene per depth and whole at 1920x1080 in turns twice,
-#   at 3840x2160, and the pool whole.
+#   (bench/patches/defer_full_cells.patch, made at 976545f and reverted: RenderSettings.
+#   defer_full_cells, --defer-full-cells on) against walked in place (off), both in a copy of the
+#   tree with the patch: its device tests, then the baseline scene per depth and whole at
+#   1920x1080 in turns twice, at 3840x2160, and the pool whole.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -116,23 +117,26 @@ fallback)
         --out "$out/resources_nofallback.json" | tail -1)
     ;;
 defer)
-    timeout 200 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_light_buffer.py \
-        -k "deferred" 2>&1 | tail -1
+    variant_tree /tmp/defer
+    (cd /tmp/defer && patch -p1 -s < "$OLDPWD/bench/patches/defer_full_cells.patch")
+    (cd /tmp/defer && timeout 200 python3 -m pytest -q -p no:cacheprovider \
+        tests/raytrace/test_light_buffer.py -k "deferred" 2>&1 | tail -1)
     for rep in 1 2; do
         for d in on off; do
-            lb bench frame $f $static --per-depth --no-overlap --defer-full-cells $d \
-                --out "$out/static_pd_defer${d}_$rep" | tail -1
+            in_tree /tmp/defer bench frame $f $static --per-depth --no-overlap \
+                --defer-full-cells $d --out "$out/static_pd_defer${d}_$rep" | tail -1
         done
         for d in on off; do
-            lb bench frame $f $static --defer-full-cells $d --out "$out/static_defer${d}_$rep" \
-                | tail -1
+            in_tree /tmp/defer bench frame $f $static --defer-full-cells $d \
+                --out "$out/static_defer${d}_$rep" | tail -1
         done
     done
     for d in on off; do
-        lb bench frame $k $static --defer-full-cells $d --out "$out/static4k_defer$d" | tail -1
+        in_tree /tmp/defer bench frame $k $static --defer-full-cells $d \
+            --out "$out/static4k_defer$d" | tail -1
     done
     for d in on off; do
-        lb bench frame $f --defer-full-cells $d --out "$out/pool_defer$d" | tail -1
+        in_tree /tmp/defer bench frame $f --defer-full-cells $d --out "$out/pool_defer$d" | tail -1
     done
     ;;
 *)

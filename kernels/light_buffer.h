@@ -20,7 +20,6 @@
 #define LB_MEDIUM_CELLS 4096
 /* light_buffer_blocked's answers */
 #define LB_UNKNOWN (-1)
-#define LB_FULL (-2) /* unknown too: a cell of more than LB_SLOTS triangles */
 #define LB_CLEAR 0
 #define LB_BLOCKED 1
 
@@ -52,8 +51,8 @@ typedef struct {
 #define LIGHT_BUFFER_ARGS lb_maps, lb_cells, lb_slots, lb_tris
 
 /* Whether a shadow ray from org along dir (toward light l) within [0, tmax) is blocked by an
- * opaque triangle of the map: LB_BLOCKED, LB_CLEAR, or LB_UNKNOWN (no map, off a map that some
- * triangle reached past) or LB_FULL (a full cell): walk the BVH. */
+ * opaque triangle of the map: LB_BLOCKED, LB_CLEAR, or LB_UNKNOWN (no map, a full cell, off a map
+ * that some triangle reached past): walk the BVH. */
 inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* restrict instances,
                                 uint light, float3 org, float3 dir, float tmax)
 {
@@ -65,7 +64,7 @@ inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* re
     const int cell = m.cell_base + (int)cv * m.n_u + (int)cu;
     const int2 c = lb_cells[cell];
     if (c.x == 0 || dot(org, m.toward.xyz) > ordered_to_float(c.y)) return LB_CLEAR;
-    if (c.x > LB_SLOTS) return LB_FULL;
+    if (c.x > LB_SLOTS) return LB_UNKNOWN;
     int inst = -1;
     TraceRay r;
     for (int k = 0; k < c.x; ++k) {

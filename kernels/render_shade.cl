@@ -28,12 +28,12 @@ __kernel void render_shadow(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const R
                             __global const uint* counts, const uint depth,
                             __global float4* restrict radiance,
                             __global const float4* restrict caustic_map, const CausticParams cprm,
-                            LIGHT_BUFFER_PARAMS, SHADOW_DEFER_PARAMS)
+                            LIGHT_BUFFER_PARAMS)
 {
     const uint n = counts[depth];
     for (uint i = get_global_id(0); i < n; i += get_global_size(0))
         shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays,
-                   hits, i, radiance, caustic_map, &cprm, defer_list, defer_n + depth);
+                   hits, i, radiance, caustic_map, &cprm);
 }
 
 /* The same, each round's entries taken by the work-items in the order of their cost class
@@ -43,7 +43,7 @@ __kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void render_
     __global const Light* restrict lights, __global const Ray* restrict rays,
     __global const Hit* restrict hits, __global const uint* counts, const uint depth,
     __global float4* restrict radiance, __global const float4* restrict caustic_map,
-    const CausticParams cprm, LIGHT_BUFFER_PARAMS, SHADOW_DEFER_PARAMS)
+    const CausticParams cprm, LIGHT_BUFFER_PARAMS)
 {
     __local RenderBins bins;
     const uint n = counts[depth];
@@ -54,28 +54,8 @@ __kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void render_
         const uint i = bin_round(&bins, j, cls);
         if (i < n)
             shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays,
-                       hits, i, radiance, caustic_map, &cprm, defer_list, defer_n + depth);
+                       hits, i, radiance, caustic_map, &cprm);
     }
-}
-
-/* Level depth's hits that render_shadow, render_shadow_binned or render_shadow_trace* handed
- * over (render_shadow.h: RenderParams.defer_full_cells), each as those would have done it, the
- * BVH walked where the cell is full; launched right after them. */
-__kernel void render_shadow_deferred(SCENE_PARAMS, RENDER_GEOM_PARAMS,
-                                     __constant const RenderParams* prm,
-                                     __global const Light* restrict lights,
-                                     __global const Ray* restrict rays,
-                                     __global const Hit* restrict hits, const uint depth,
-                                     __global float4* restrict radiance,
-                                     __global const float4* restrict caustic_map,
-                                     const CausticParams cprm, LIGHT_BUFFER_PARAMS,
-                                     __global const uint* restrict defer_list,
-                                     __global const uint* restrict defer_n)
-{
-    const uint n = defer_n[depth];
-    for (uint j = get_global_id(0); j < n; j += get_global_size(0))
-        shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays,
-                   hits, defer_list[j], radiance, caustic_map, &cprm, 0, 0);
 }
 
 #if TRACE_COOP

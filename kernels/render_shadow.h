@@ -29,22 +29,16 @@ inline float smooth01(float e0, float e1, float x)
  * field and the ray climbs faster than its slopes (RenderParams.one_crossing, hf_climbs), the
  * walks that can find nothing are left out: the one from a point over the surface
  * (hf_unreachable: the water's own sunlit points) and the one after the ray leaves the water
- * (the floor's). With defer, a ray whose cell of the light's map is full (LB_FULL) sets
- * *deferred and returns at once: its caller hands the hit to render_shadow_deferred. */
+ * (the floor's). */
 inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
                                    __constant const RenderParams* prm, uint light, float3 org,
-                                   float3 dir, float tmax, int medium, bool defer,
-                                   bool* deferred)
+                                   float3 dir, float tmax, int medium)
 {
     /* one any-hit call site for both cases (one traversal less inlined) */
     const uint opaque = prm->transmissive_shadows ? RENDER_MASK_OPAQUE : ~0u;
     const int mapped = light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, org, dir, tmax);
-    if (defer && mapped == LB_FULL) {
-        *deferred = true;
-        return (float3)(0.0f);
-    }
     if (mapped == LB_BLOCKED
-        || ((mapped == LB_UNKNOWN || mapped == LB_FULL)
+        || (mapped == LB_UNKNOWN
             && trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW)))
         return (float3)(0.0f);
     if (!prm->transmissive_shadows) return (float3)(1.0f);
@@ -151,27 +145,14 @@ inline bool light_below_cut(__constant const RenderParams* prm, const ShadowSite
     return max3(o->w * E * brdf) < prm->min_weight;
 }
 
-/* The shadow stage's list of deferred hits (RenderParams.defer_full_cells): defer_list, and
- * defer_n[d], the count of level d's (zeroed by render_raygen). A light-buffer cell of more than
- * LB_SLOTS triangles (near a detailed mesh: the sailboat's rigging) sends its rays to the BVH's
- * any-hit walk, a hundred times longer than the map's answer: one such ray held a warp of 31
- * answered ones. In the launches of a work-item per ray, such a hit goes to the list whole, and
- * render_shadow_deferred walks the list right after, before anything reads the level's
- * radiance: the same body for the hit, so the same bytes. */
-#define SHADOW_DEFER_PARAMS __global uint* restrict defer_list, __global uint* restrict defer_n
-
-/* With coop_on, the whole work-group runs it for ray i alike; one work-item adds the light.
- * defer_list 0: no deferring (the cooperative kernels, render_shadow_deferred itself); else a
- * hit with a full cell goes to defer_list, counted in *defer_n, when prm->defer_full_cells. */
+/* With coop_on, the whole work-group runs it for ray i alike; one work-item adds the light. */
 inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
                        __constant const RenderParams* prm,
                        __global const Light* restrict lights, __global const Ray* restrict rays,
                        __global const Hit* restrict hits, uint i,
                        __global float4* restrict radiance,
-                       __global const float4* restrict caustic_map, const CausticParams* cp,
-                       __global uint* restrict defer_list, __global uint* restrict defer_n)
+                       __global const float4* restrict caustic_map, const CausticParams* cp)
 {
-    const bool defer = defer_list != 0 && prm->defer_full_cells != 0u;
     ShadowSite o;
     if (!shadow_site(RENDER_GEOM_ARGS, prm, rays, hits, i, cp, &o)) return;
     float3 sum = (float3)(0.0f);
@@ -185,13 +166,8 @@ inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
             sum += E * brdf;
             continue;
         }
-        bool deferred = false;
         const float3 T = shadow_transmittance(TRACE_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm,
-                                              l, o.org, ldir, dist, o.medium, defer, &deferred);
-        if (deferred) {   /* nothing written yet: the deferred launch does the whole hit */
-            defer_list[atomic_inc(defer_n)] = i;
-            return;
-        }
+                                              l, o.org, ldir, dist, o.medium);
         if (max3(T) <= 0.0f) continue;
         sum += T * E * brdf;
     }
@@ -213,7 +189,8 @@ inline void shadow_rays_coop(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARA
     const bool on = allowed && n <= TRACE_COOP_MAX_RAYS;
     TRACE_COOP_FOR(i, n, on)
         shadow_ray(TRACE_COOP_IF_ARGS(coop, on), RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
-                   rays, hits, i, radiance, caustic_map, cp, 0, 0);
+                   rays, hits, i,
+                   radiance, caustic_map, cp);
 }
 #endif
 

@@ -83,11 +83,9 @@ __kernel void render_shadow_lean(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_
     const uint front = list_counts[0], n = front + list_counts[1];
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
         const Ray s = list[j < front ? j : capacity - 1u - (j - front)];
-        bool deferred = false;   /* never: no deferring here */
         const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS,
                                               LIGHT_BUFFER_ARGS, prm, 0u, ray_org(&s),
-                                              ray_dir(&s), as_float(s.sample), s.medium, false,
-                                              &deferred);
+                                              ray_dir(&s), as_float(s.sample), s.medium);
         if (max3(T) > 0.0f) radiance[s.pixel] += (float4)(T * ray_weight(&s), 0.0f);
     }
 }

@@ -26,7 +26,6 @@ __kernel void render_shadow_trace(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                   __global float4* restrict shadow_radiance,
                                   __global const float4* restrict caustic_map,
                                   const CausticParams cprm, LIGHT_BUFFER_PARAMS,
-                                  SHADOW_DEFER_PARAMS,
                                   __global const Ray* restrict rays,
                                   __global Hit* restrict hits)
 {
@@ -34,8 +33,7 @@ __kernel void render_shadow_trace(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
         if (j < n_shadow) {
             shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
-                       shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm, defer_list,
-                       defer_n + depth - 1u);
+                       shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm);
         } else {
             const uint i = j - n_shadow;
             const Ray r = rays[i];
@@ -54,7 +52,6 @@ __kernel void render_shadow_trace_shade(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                         __global float4* restrict shadow_radiance,
                                         __global const float4* restrict caustic_map,
                                         const CausticParams cprm, LIGHT_BUFFER_PARAMS,
-                                        SHADOW_DEFER_PARAMS,
                                         __constant const Camera* cam,
                                         __global const Ray* restrict rays,
                                         __global Hit* restrict hits,
@@ -66,8 +63,7 @@ __kernel void render_shadow_trace_shade(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
         if (j < n_shadow) {
             shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
-                       shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm, defer_list,
-                       defer_n + depth - 1u);
+                       shadow_rays, shadow_hits, j, shadow_radiance, caustic_map, &cprm);
         } else {
             const uint i = j - n_shadow;
             const Ray r = rays[i];
@@ -90,7 +86,7 @@ render_shadow_trace_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Re
                            __global const Hit* restrict shadow_hits,
                            __global float4* restrict shadow_radiance,
                            __global const float4* restrict caustic_map, const CausticParams cprm,
-                           LIGHT_BUFFER_PARAMS, SHADOW_DEFER_PARAMS,
+                           LIGHT_BUFFER_PARAMS,
                            __global const Ray* restrict rays, __global Hit* restrict hits)
 {
     __local RenderBins bins;
@@ -103,8 +99,7 @@ render_shadow_trace_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const Re
         if (i >= n) continue;
         if (i < n_shadow) {
             shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
-                       shadow_rays, shadow_hits, i, shadow_radiance, caustic_map, &cprm, defer_list,
-                       defer_n + depth - 1u);
+                       shadow_rays, shadow_hits, i, shadow_radiance, caustic_map, &cprm);
         } else {
             const Ray r = rays[i - n_shadow];
             hits[i - n_shadow] = trace_ray(TRACE_SERIAL_ARGS, &r, depth);
@@ -122,7 +117,6 @@ render_shadow_trace_shade_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                  __global float4* restrict shadow_radiance,
                                  __global const float4* restrict caustic_map,
                                  const CausticParams cprm, LIGHT_BUFFER_PARAMS,
-                                 SHADOW_DEFER_PARAMS,
                                  __constant const Camera* cam,
                                  __global const Ray* restrict rays, __global Hit* restrict hits,
                                  __global float4* restrict radiance,
@@ -139,8 +133,7 @@ render_shadow_trace_shade_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS,
         if (i >= n) continue;
         if (i < n_shadow) {
             shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights,
-                       shadow_rays, shadow_hits, i, shadow_radiance, caustic_map, &cprm, defer_list,
-                       defer_n + depth - 1u);
+                       shadow_rays, shadow_hits, i, shadow_radiance, caustic_map, &cprm);
         } else {
             const uint t = i - n_shadow;
             const Ray r = rays[t];

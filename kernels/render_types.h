@@ -127,8 +127,7 @@ typedef struct {
     int crossing_instance; /* the one instance holding the dielectrics, else -1 (render_shadow.h) */
     uint one_crossing;  /* 1: where crossing_instance is the height field, rays that climb
                            faster than its slopes cross it at most once (render_shadow.h) */
-    uint defer_full_cells; /* 1: the per-work-item shadow launches hand a hit whose shadow ray
-                              meets a full light-buffer cell to render_shadow_deferred */
+    float pad2;
 } RenderParams;
 
 /* 16 bytes. render_raygen's per-launch values: the chunk it starts. */

@@ -105,9 +105,8 @@ from raytrace.render_types import (
     Tonemap,
 )
 
-#: Device bytes per ray slot: input and output ray, hit record, radiance, child count/offset,
-#: and the shadow stage's list of deferred hits (``defer_full_cells``).
-BYTES_PER_RAY_SLOT = 2 * RAY.itemsize + HIT_DTYPE.itemsize + 16 + 4 + 4
+#: Device bytes per ray slot: input and output ray, hit record, radiance, child count/offset.
+BYTES_PER_RAY_SLOT = 2 * RAY.itemsize + HIT_DTYPE.itemsize + 16 + 4
 
 
 @dataclasses.dataclass(frozen=True)
@@ -155,10 +154,6 @@ class RenderSettings:
                                   #: map of the opaque triangles' shadows (raytrace.light_buffer:
                                   #: the shadow rays' any-hit query without a BVH walk, the
                                   #: same image); 0: none
-    defer_full_cells: bool = True  #: with a light buffer, the shadow launches of a work-item
-                                   #: per ray hand the hits whose cell is full (their rays walk
-                                   #: the BVH) to a launch of their own right after
-                                   #: (render_shadow_deferred; render_shadow.h); the same image
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -231,9 +226,6 @@ BIN_WG = 256
 #: and the tail levels of 4k-50k rays were 5-15% slower binned (BENCHMARKS.md, 2026-12-02). The
 #: secondary trace binned the same way (refracted rays apart from reflected) was 3-6% slower.
 BIN_MIN_RAYS = 1 << 18
-#: Most work-items of a render_shadow_deferred launch (a grid-stride loop over the level's
-#: deferred hits, whose count stays on the device): a few percent of a level's rays at most.
-DEFER_WORK_ITEMS = 1 << 16
 
 
 def device_cost_bins(rt: Runtime) -> bool:
@@ -323,8 +315,6 @@ class Renderer:
         self.radiance = [rt.buffer(cap * 16)] * 2
         self._level_buffers()
         self.child = rt.buffer(cap * 4)
-        self.defer_list = rt.buffer(cap * 4)   # render_shadow.h: the deferred shadow hits
-        self.defer_n = rt.buffer(4 * (MAX_DEPTH + 1))   # their count per level
         self.block_sums = rt.buffer(4 * -(-cap // SCAN_BLOCK))
         self.counts = rt.buffer(4 * (MAX_DEPTH + 2))
         self.stats = rt.buffer(4 * STATS_LEN)
@@ -474,12 +464,6 @@ class Renderer:
         way."""
         self.settings = dataclasses.replace(self.settings, one_crossing=bool(on))
 
-    def set_defer_full_cells(self, on: bool) -> None:
-        """Hand the shadow rays whose light-buffer cell is full to render_shadow_deferred
-        (``defer_full_cells``) from the next frame on; an A/B switch (bench frame
-        --defer-full-cells on|off). The same image either way."""
-        self.settings = dataclasses.replace(self.settings, defer_full_cells=bool(on))
-
     def set_stage_per_depth(self, on: bool = True) -> None:
         """Time each depth level's trace, shade, shadow, scan and gather under its own stage
         (``render.shadow.d3``), e.g. to see the tail levels of few rays (bench frame
@@ -506,8 +490,6 @@ class Renderer:
                 "trace_shade": launcher("render_trace.cl", "render_trace_shade", trace),
                 "shade": launcher("render_shade.cl", "render_shade", "render.shade"),
                 "shadow": launcher("render_shade.cl", "render_shadow", "render.shadow"),
-                "shadow_deferred": launcher("render_shade.cl", "render_shadow_deferred",
-                                            "render.shadow"),
                 "scan": launcher("render_secondary.cl", "render_scan", "render.secondary"),
                 "gather": launcher("render_frame.cl", "render_gather", "render.gather"),
                 # the same kernel for the tonemap pass after the last level: its own object,
@@ -579,7 +561,7 @@ class Renderer:
             return
         s = self.settings
         self.k_raygen.bind(cam=self.camera_buf, rays=self.rays[0], counts=self.counts,
-                           stats=self.stats, defer_n=self.defer_n)
+                           stats=self.stats)
         shading = {**geom, "prm": self.params_buf}
         for d, k in enumerate(self._k):
             wave = {"rays": self.rays[d % 2], "counts": self.counts, "depth": d}
@@ -592,13 +574,10 @@ class Renderer:
                                   hits=hits, **out)
             light = {"lights": self.scene.light_buf, "caustic_map": self.caustic_map,
                      "cprm": self.caustic_params, **lbuf}
-            defer = {"defer_list": self.defer_list, "defer_n": self.defer_n}
             for f in ("", "_binned"):   # the binned flavour: the plain kernel's arguments
                 if "shadow" + f in k:
                     k["shadow" + f].bind(**scene, **shading, **light, **wave, hits=hits,
-                                         radiance=radiance, **defer)
-            k["shadow_deferred"].bind(**scene, **shading, **light, rays=wave["rays"], depth=d,
-                                      hits=hits, radiance=radiance, **defer)
+                                         radiance=radiance)
             if "shadow_trace" in k:   # level d - 1's shadow rays, level d's trace (and shade)
                 last = {"shadow_rays": self.rays[(d - 1) % 2],
                         "shadow_hits": self.hits[(d - 1) % 2],
@@ -606,10 +585,10 @@ class Renderer:
                 for f in ("", "_binned"):
                     if "shadow_trace" + f in k:
                         k["shadow_trace" + f].bind(**scene, **shading, **light, **last, **wave,
-                                                   hits=hits, **defer)
+                                                   hits=hits)
                         k["shadow_trace_shade" + f].bind(**scene, **shading, **light, **last,
                                                          cam=self.camera_buf, **wave,
-                                                         hits=hits, **out, **defer)
+                                                         hits=hits, **out)
             if "trace_coop" in k:   # the cooperative flavours: the same arguments
                 k["trace_coop"].bind(**scene, **wave, hits=hits)
                 k["trace_shade_coop"].bind(**scene, **shading, cam=self.camera_buf, **wave,
@@ -685,7 +664,6 @@ class Renderer:
         p["transmissive_shadows"] = int(sc.has_dielectric)
         p["crossing_instance"] = sc.crossing_instance if s.direct_crossings else -1
         p["one_crossing"] = int(s.one_crossing)
-        p["defer_full_cells"] = int(s.defer_full_cells)
         p["tonemap"] = int(Tonemap.from_str(s.tonemap))
         p["max_depth"] = s.bounces
         p["capacity"] = self.capacity
@@ -726,15 +704,13 @@ class Renderer:
         bins = tuple(s.cost_bins and d >= 1 and (hint is None or d >= len(hint)
                                                  or hint[d] >= BIN_MIN_RAYS)
                      for d in range(deepest + 1))
-        # the shadow kernels may hand hits to render_shadow_deferred where a light has a map
-        defer = s.defer_full_cells and self.light_buffer.n_map_cells > 0
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
-               s.overlap_levels, s.overlap_from, few, bins, defer, self._bind_version)
+               s.overlap_levels, s.overlap_from, few, bins, self._bind_version)
         ops = self._plans.get(key)
         if ops is None:
             if len(self._plans) >= 16:
                 self._plans.clear()
-            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few, bins, defer)
+            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few, bins)
         self._run(ops, rebind=len(self._plan) > 1 or ops is not self._last_ops)
         self._last_ops = ops
         if read_stats:
@@ -753,13 +729,12 @@ class Renderer:
     _LAUNCH, _BIND, _FLUSH = 0, 1, 2
 
     def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool, few: tuple,
-                   bins: tuple, defer: bool) -> list:
+                   bins: tuple) -> list:
         """The frame's launches in order, sizes and arguments decided: what the per-frame loop
         did, made once per (sizes, depth, lights, stage names, levels of few rays, binned
-        levels, deferring, bindings). ``few[d]``: where level d's rays go one per work-group,
-        the power of two at or above its last ray count (its work-groups), else None;
-        ``bins[d]``: level d's shadow rays go through the binned kernels; ``defer``: each
-        launch of a work-item per shadow ray is followed by render_shadow_deferred."""
+        levels, bindings). ``few[d]``: where level d's rays go one per work-group, the power of
+        two at or above its last ray count (its work-groups), else None; ``bins[d]``: level d's
+        shadow rays go through the binned kernels."""
         s, ks = self.settings, self._k
         ls, scan_ls = (s.local_size,), (SCAN_WG,)
         ops = []
@@ -794,11 +769,6 @@ class Renderer:
             else:
                 launch(k[name], size, ls)
 
-        def deferred(d: int, size: tuple) -> None:   # level d's hits its shadow launch handed
-            if defer:                                # over: a few percent of its rays at most
-                n = min(size[0], DEFER_WORK_ITEMS)
-                launch(ks[d]["shadow_deferred"], (-(-n // ls[0]) * ls[0],), ls)
-
         for (rp, (g_both, g_accumulate, g_finish, g_scatter), raygen_size, _), sz in zip(
                 self._plan, sizes, strict=True):
             bind(self.k_raygen, rp=rp)
@@ -815,8 +785,6 @@ class Renderer:
                 if not overlapped(depth):
                     if has_lights:
                         per_ray(k, "shadow", depth, ray_size)
-                        if not coop(depth):
-                            deferred(depth, ray_size)
                     if depth < deepest:
                         launch(k["scan"], scan_size, scan_ls)
                         bind(k["gather"], gp=g_both)
@@ -850,7 +818,6 @@ class Renderer:
                                (-(-both // BIN_WG) * BIN_WG,), (BIN_WG,))
                     else:
                         launch(nxt["shadow_" + trace], (both,), ls)
-                    deferred(depth, ray_size)
                 else:
                     per_ray(nxt, trace, depth + 1, next_size)
                 bind(k["gather"], gp=g_accumulate)
@@ -909,7 +876,7 @@ class Renderer:
         cam = self.camera.tobytes()
         sc, s = self.scene, self.settings
         key = (sc.sky, tuple(sc.ambient), len(sc.lights), len(sc.materials),
-               sc.crossing_instance, s.direct_crossings, s.one_crossing, s.defer_full_cells)
+               sc.crossing_instance, s.direct_crossings, s.one_crossing)
         if key != self._params_key:
             self._params_key, self._params_rec = key, np.array([self.params()])
         prm = self._params_rec.tobytes()

@@ -101,7 +101,7 @@ RENDERPARAMS = np.dtype([("ambient", f4), ("sky_zenith", f4), ("sky_horizon", f4
                          ("tonemap", np.uint32), ("max_depth", np.uint32),
                          ("capacity", np.uint32), ("min_weight", np.float32),
                          ("crossing_instance", np.int32), ("one_crossing", np.uint32),
-                         ("defer_full_cells", np.uint32)])
+                         ("pad2", np.float32)])
 
 AOV = np.dtype([("normal", f4), ("depth", np.float32), ("prim", np.int32), ("inst", np.int32),
                 ("material", np.int32)])

@@ -98,11 +98,10 @@ def test_bench_frame_light_buffer_is_recorded_and_checked(tmp_path, capsys):
     out = tmp_path / "res"
     assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
                  "--warmup", "1", "--frame-time", "0.1", "--caustics", "off",
-                 "--light-buffer", "64", "--one-crossing", "off", "--defer-full-cells", "off",
-                 "--out", str(out)]) == 0
+                 "--light-buffer", "64", "--one-crossing", "off", "--out", str(out)]) == 0
     r = json.loads((out / "bench_frame.json").read_text())[0]
     assert r["light_buffer"] == 64 and r["render.light_buffer.raster_ms"] > 0
-    assert r["one_crossing"] is False and r["defer_full_cells"] is False
+    assert r["one_crossing"] is False
     capsys.readouterr()
     assert main(["bench", "frame", "--light-buffer", "-1", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()

@@ -273,35 +273,6 @@ def test_frames_are_the_frames_without_it(rt, chunk, coop_from, bins):
     assert r.light_buffer.active and r.light_buffer.read(0)["count"].sum() > 0
 
 
-@pytest.mark.parametrize("overlap,bins,coop_from", [(False, False, None), (True, True, None),
-                                                     (True, False, 1)])
-def test_hits_of_full_cells_deferred_give_the_same_frames(rt, overlap, bins, coop_from):
-    """A coarse map (6 cells: a quarter list more than LB_SLOTS triangles): the shadow launches of
-    work-item per ray hand those hits to render_shadow_deferred (RenderSettings.
-    defer_full_cells), the cooperative ones keep them; the frames are the same bytes."""
-    from raytrace.render import MAX_DEPTH
-
-    sc = clutter(rt)
-    out = []
-    for defer in (False, True):
-        s = RenderSettings(width=24, height=18, bounces=3, light_buffer=6, overlap_levels=overlap,
-                           overlap_from=0, cost_bins=bins, coop_from=coop_from,
-                           defer_full_cells=defer)
-        r = Renderer(rt, sc, s)
-        r.set_camera(*CAMERAS[1], (0, 1, 0), 50)
-        imgs = [r.render() for _ in range(2)]   # the second sized by the first's counts
-        out.append((imgs, rt.to_host(r.defer_n, np.uint32, MAX_DEPTH + 1)))
-        assert (r.light_buffer.read(0)["count"] > LB_SLOTS).mean() > 0.2
-    (off, n_off), (on, n_on) = out
-    assert np.array_equal(np.array(off), np.array(on))
-    assert off[0][..., :3].std() > 5
-    assert n_off.sum() == 0 and n_on[0] > 20   # level 0: a work-item per ray in each case
-    if coop_from is not None:   # from level 1 on, once sized by counts, one ray per work-group
-        assert n_on[1:].sum() == 0
-    else:
-        assert n_on[1] > 0
-
-
 def test_frames_follow_a_moved_instance(rt):
     s = RenderSettings(width=24, height=18, bounces=2)
     m = np.array([[0, 0, 1, -0.3], [0, 1, 0, 0.1], [-1, 0, 0, 0.2], [0, 0, 0, 1]])

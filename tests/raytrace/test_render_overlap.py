@@ -61,11 +61,11 @@ def test_set_overlap_switches_the_order_and_keeps_the_image(rt):
     s = RenderSettings(width=16, height=12, bounces=2, overlap_levels=False)
     r = Renderer(rt, build(rt, 2), s)
     r.set_camera(*CAMERAS[0], (0, 1, 0), 50)
-    assert r.hits[0] is r.hits[1] and r.memory_report()["bytes_per_ray_slot"] == 140
+    assert r.hits[0] is r.hits[1] and r.memory_report()["bytes_per_ray_slot"] == 136
     want = r.render()
     r.set_overlap(True)
     assert r.hits[0] is not r.hits[1] and r.radiance[0] is r.radiance[1]
-    assert r.memory_report()["bytes_per_ray_slot"] == 140 + HIT_DTYPE.itemsize
+    assert r.memory_report()["bytes_per_ray_slot"] == 136 + HIT_DTYPE.itemsize
     for on, first, combined in ((True, 0, 2), (False, 0, 0), (True, 1, 1), (True, 2, 0),
                                 (True, None, 0)):
         r.set_overlap(on, first)
