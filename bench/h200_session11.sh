@@ -27,6 +27,9 @@
 #   defer_full_cells, --defer-full-cells on) against walked in place (off), both in a copy of the
 #   tree with the patch: its device tests, then the baseline scene per depth and whole at
 #   1920x1080 in turns twice, at 3840x2160, and the pool whole.
+# PART slots: a light-buffer cell listing up to 16 triangles (LB_SLOTS 16, a copy of the tree:
+#   slots16) against 8 (the tree): the baseline scene per depth and whole at 1920x1080 in
+#   turns, and the pool whole. (Its tests ran on PoCL: the same frames.)
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -138,6 +141,17 @@ defer)
     for d in on off; do
         in_tree /tmp/defer bench frame $f --defer-full-cells $d --out "$out/pool_defer$d" | tail -1
     done
+    ;;
+slots)
+    variant_tree /tmp/slots16 's/^#define LB_SLOTS 8$/#define LB_SLOTS 16/' kernels/light_buffer.h \
+        's/^LB_SLOTS = 8 /LB_SLOTS = 16 /' raytrace/light_buffer.py
+    g="$f $static --per-depth --no-overlap"
+    lb bench frame $g --out "$out/static_pd_slots8" | tail -1
+    in_tree /tmp/slots16 bench frame $g --out "$out/static_pd_slots16" | tail -1
+    lb bench frame $f $static --out "$out/static_slots8" | tail -1
+    in_tree /tmp/slots16 bench frame $f $static --out "$out/static_slots16" | tail -1
+    lb bench frame $f --out "$out/pool_slots8" | tail -1
+    in_tree /tmp/slots16 bench frame $f --out "$out/pool_slots16" | tail -1
     ;;
 *)
     echo "unknown PART $part" >&2
