@@ -30,7 +30,7 @@ LIGHT_BUFFER = np.dtype([("u", _F4), ("v", _F4), ("toward", _F4), ("n_u", np.int
                          ("n_v", np.int32), ("cell_base", np.int32), ("outside_cell", np.int32),
                          ("big_cell", np.int32), ("margin", np.float32),
                          ("depth_slack", np.float32), ("pad", np.float32)])
-LB_SLOTS = 8            #: kernels/light_buffer.h
+LB_SLOTS = 16           #: kernels/light_buffer.h
 #: Most cells along a map's side.
 MAX_CELLS = 8192
 #: Most triangles listed: past it the per-frame raster would cost more than the walks it saves.
