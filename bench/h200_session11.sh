@@ -27,9 +27,12 @@
 #   defer_full_cells, --defer-full-cells on) against walked in place (off), both in a copy of the
 #   tree with the patch: its device tests, then the baseline scene per depth and whole at
 #   1920x1080 in turns twice, at 3840x2160, and the pool whole.
-# PART slots: a light-buffer cell listing up to 16 triangles (LB_SLOTS 16, a copy of the tree:
-#   slots16) against 8 (the tree): the baseline scene per depth and whole at 1920x1080 in
-#   turns, and the pool whole. (Its tests ran on PoCL: the same frames.)
+# PART slots: a light-buffer cell listing up to 16 triangles (LB_SLOTS 16) against 8: the
+#   baseline scene per depth and whole at 1920x1080 in turns, and the pool whole. Run at
+#   be8dca8, when the tree had 8 and a copy 16; the tree has 16 since 6edd337, so the copy
+#   (slots16) now has 8 and the results' names are swapped.
+# PART slots-pocl: the same A/B on PoCL (this machine's CPUs): the shadow rays' BVH walks
+#   (bench/trace_visits.py's counters) and whole frames, small, the map of 1024 cells on.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -143,8 +146,8 @@ defer)
     done
     ;;
 slots)
-    variant_tree /tmp/slots16 's/^#define LB_SLOTS 8$/#define LB_SLOTS 16/' kernels/light_buffer.h \
-        's/^LB_SLOTS = 8 /LB_SLOTS = 16 /' raytrace/light_buffer.py
+    variant_tree /tmp/slots16 's/^#define LB_SLOTS 16$/#define LB_SLOTS 8/' kernels/light_buffer.h \
+        's/^LB_SLOTS = 16 /LB_SLOTS = 8  /' raytrace/light_buffer.py
     g="$f $static --per-depth --no-overlap"
     lb bench frame $g --out "$out/static_pd_slots8" | tail -1
     in_tree /tmp/slots16 bench frame $g --out "$out/static_pd_slots16" | tail -1
@@ -152,6 +155,21 @@ slots)
     in_tree /tmp/slots16 bench frame $f $static --out "$out/static_slots16" | tail -1
     lb bench frame $f --out "$out/pool_slots8" | tail -1
     in_tree /tmp/slots16 bench frame $f --out "$out/pool_slots16" | tail -1
+    ;;
+slots-pocl)
+    variant_tree /tmp/slots8 's/^#define LB_SLOTS 16$/#define LB_SLOTS 8/' kernels/light_buffer.h \
+        's/^LB_SLOTS = 16 /LB_SLOTS = 8  /' raytrace/light_buffer.py
+    visits="--scene bench/scenes/pool_static_boat.toml --boat floating --caustics off --cells 256
+            --size 480 270 --settle 0.3 --light-buffer 1024"
+    python3 bench/trace_visits.py $visits --json "$out/trace_visits_slots16.json" | grep shadow
+    (cd /tmp/slots8 && PYTHONPATH=/tmp/slots8 python3 bench/trace_visits.py $visits \
+        --json "$out/trace_visits_slots8.json" | grep shadow)
+    small="--cells 128 --size 480 270 --frames 6 --light-buffer 1024"
+    for rep in 1 2; do
+        lb bench frame $small $static --out "$out/pocl_static_slots16_$rep" | tail -1
+        in_tree /tmp/slots8 bench frame $small $static --out "$out/pocl_static_slots8_$rep" \
+            | tail -1
+    done
     ;;
 *)
     echo "unknown PART $part" >&2
