@@ -61,7 +61,7 @@ def measure(rt, scene, *, cells, size, caustics, settle, frames=1, light_buffer=
     hf = sc.heightfield.read()
     out = {"rays_per_depth": world.renderer.read_stats()["rays_per_depth"],
            "water_slope_bound": float(hf["slope"]) if sc.heightfield.mesh is not None else None,
-           "water_walks": counts["heightfield"],
+           "water_walks": counts["heightfield"], "light_buffer": counts["light_buffer"],
            "instances": {int(k): v for k, v in world.instances.items()}, "raw": counts}
     for kind in KINDS:
         c = counts[kind]
@@ -117,7 +117,8 @@ def main(argv=None) -> int:
                   f"instances {r['instances']}; the water's slope bound "
                   f"{r['water_slope_bound']}, its walks culled whole "
                   f"{r['water_walks']['culled']}, spans skipped "
-                  f"{r['water_walks']['skipped_spans']}")
+                  f"{r['water_walks']['skipped_spans']}; the light buffer's answers "
+                  f"{r['light_buffer']}")
             for kind in KINDS:
                 k = r[kind]
                 if not k["rays"]:

@@ -166,7 +166,8 @@ __kernel void light_buffer_answers(SCENE_PARAMS, LIGHT_BUFFER_PARAMS, const uint
     const uint i = get_global_id(0);
     if (i >= n) return;
     const float3 o = org[i].xyz, d = lb_maps[light].toward.xyz;
-    out[i] = (int2)(light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, o, d, INFINITY),
+    out[i] = (int2)(light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, o, d, INFINITY,
+                                         trace_stats),
                     scene_any_hit_masked(SCENE_ARGS, o, d, 0.0f, INFINITY, mask,
                                          TRACE_KIND_QUERY) ? 1 : 0);
 }

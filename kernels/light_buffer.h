@@ -51,21 +51,49 @@ typedef struct {
         __global const int* restrict lb_slots, __global const float4* restrict lb_tris
 #define LIGHT_BUFFER_ARGS lb_maps, lb_cells, lb_slots, lb_tris
 
+/* TRACE_COUNT builds count each answer's kind (scene.h TRACE_STAT_LB: Scene.trace_counts()
+ * ["light_buffer"]); others nothing */
+#if TRACE_COUNT
+#define LB_COUNT(field, n) atomic_add(stats + TRACE_STAT_LB + (field), (n))
+#else
+#define LB_COUNT(field, n)
+#endif
+#define LB_CNT_EMPTY 0
+#define LB_CNT_NEARER 1
+#define LB_CNT_TESTED_CLEAR 2
+#define LB_CNT_BLOCKED 3
+#define LB_CNT_FULL 4
+#define LB_CNT_OFF_MAP 5
+#define LB_CNT_TRIANGLES 6
+
 /* Whether a shadow ray from org along dir (toward light l) within [0, tmax) is blocked by an
  * opaque triangle of the map: LB_BLOCKED, LB_CLEAR, or LB_UNKNOWN (no map, a full cell, off a map
- * that some triangle reached past): walk the BVH. */
+ * that some triangle reached past): walk the BVH. stats: the scene's trace_stats (TRACE_COUNT). */
 inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* restrict instances,
-                                uint light, float3 org, float3 dir, float tmax)
+                                uint light, float3 org, float3 dir, float tmax,
+                                __global int* restrict stats)
 {
     const LightBuffer m = lb_maps[light];
     if (m.n_u == 0) return LB_UNKNOWN;
     const float cu = dot(org, m.u.xyz) + m.u.w, cv = dot(org, m.v.xyz) + m.v.w;
-    if (!(cu >= 0.0f && cu < (float)m.n_u && cv >= 0.0f && cv < (float)m.n_v))
+    if (!(cu >= 0.0f && cu < (float)m.n_u && cv >= 0.0f && cv < (float)m.n_v)) {
+        LB_COUNT(LB_CNT_OFF_MAP, 1);
         return lb_cells[m.outside_cell].x ? LB_UNKNOWN : LB_CLEAR;
+    }
     const int cell = m.cell_base + (int)cv * m.n_u + (int)cu;
     const int2 c = lb_cells[cell];
-    if (c.x == 0 || dot(org, m.toward.xyz) > ordered_to_float(c.y)) return LB_CLEAR;
-    if (c.x > LB_SLOTS) return LB_UNKNOWN;
+    if (c.x == 0) {
+        LB_COUNT(LB_CNT_EMPTY, 1);
+        return LB_CLEAR;
+    }
+    if (dot(org, m.toward.xyz) > ordered_to_float(c.y)) {
+        LB_COUNT(LB_CNT_NEARER, 1);
+        return LB_CLEAR;
+    }
+    if (c.x > LB_SLOTS) {
+        LB_COUNT(LB_CNT_FULL, 1);
+        return LB_UNKNOWN;
+    }
     int inst = -1;
     TraceRay r;
     for (int k = 0; k < c.x; ++k) {
@@ -76,9 +104,14 @@ inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* re
             r = trace_object_ray(instances + inst, org, dir);
         }
         float th, uh, vh;
-        if (trace_triangle(&r, p0.xyz, p1.xyz, p2.xyz, 0.0f, tmax, &th, &uh, &vh))
+        if (trace_triangle(&r, p0.xyz, p1.xyz, p2.xyz, 0.0f, tmax, &th, &uh, &vh)) {
+            LB_COUNT(LB_CNT_BLOCKED, 1);
+            LB_COUNT(LB_CNT_TRIANGLES, k + 1);
             return LB_BLOCKED;
+        }
     }
+    LB_COUNT(LB_CNT_TESTED_CLEAR, 1);
+    LB_COUNT(LB_CNT_TRIANGLES, c.x);
     return LB_CLEAR;
 }
 

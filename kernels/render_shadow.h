@@ -36,7 +36,8 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFE
 {
     /* one any-hit call site for both cases (one traversal less inlined) */
     const uint opaque = prm->transmissive_shadows ? RENDER_MASK_OPAQUE : ~0u;
-    const int mapped = light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, org, dir, tmax);
+    const int mapped = light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, org, dir, tmax,
+                                            trace_stats);
     if (mapped == LB_BLOCKED
         || (mapped == LB_UNKNOWN
             && trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW)))

@@ -20,7 +20,7 @@
    trace_stats: [0] counts traversal-stack overflows (never expected: the stack is deeper than
                 any tree the builder can make; a non-zero count means hits may be missing);
                 [1] counts cooperative walks redone serially (TRACE_STAT_COOP_REDO);
-                [2], [3] and, from TRACE_STAT_COUNT, the work counters of TRACE_COUNT
+                [2] to [10] and, from TRACE_STAT_COUNT, the work counters of TRACE_COUNT
                 builds follow. */
 /* TRACE_WIDE picks the BLAS layout the kernels read; the host passes it (kernels.runtime adds
    the runtime's layout to every build, raytrace.scene.Scene.trace_defines names the scene's):
@@ -56,6 +56,12 @@
    ray departs from the surface faster than its slopes (traverse_heightfield.h) */
 #define TRACE_STAT_HF_CULLED 2
 #define TRACE_STAT_HF_SKIPPED 3
+/* TRACE_COUNT builds: the light buffer's answers (light_buffer.h), TRACE_STAT_LB_FIELDS from
+   TRACE_STAT_LB: origins whose cell lists nothing, nearer the light than the cell's bound, in a
+   cell whose triangles were tested clear, blocked by one of them, in a full cell, off the map;
+   then the triangles tested */
+#define TRACE_STAT_LB 4
+#define TRACE_STAT_LB_FIELDS 7
 /* Traversal work counters, written only by TRACE_COUNT=1 builds (a debug define, traverse.h;
    raytrace.scene.Scene.trace_counts reads them): per ray kind, TRACE_COUNT_FIELDS uint sums
    from TRACE_STAT_COUNT, then per kind the BLAS nodes visited per instance (ids above
@@ -77,7 +83,7 @@
 #define TRACE_CNT_HITS 6       /* traversals that found a hit */
 #define TRACE_COUNT_FIELDS 8
 #define TRACE_COUNT_INST 8
-#define TRACE_STAT_COUNT 4
+#define TRACE_STAT_COUNT 11 /* TRACE_STAT_LB + TRACE_STAT_LB_FIELDS */
 #define TRACE_STAT_INST (TRACE_STAT_COUNT + TRACE_KINDS * TRACE_COUNT_FIELDS)
 #define TRACE_STATS_LEN (TRACE_STAT_INST + TRACE_KINDS * TRACE_COUNT_INST)
 

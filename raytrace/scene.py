@@ -48,12 +48,17 @@ TRACE_STAT_COOP_REDO = 1
 #: TRACE_COUNT builds: height-field walks culled whole and spans skipped by the slopes.
 TRACE_STAT_HF_CULLED = 2
 TRACE_STAT_HF_SKIPPED = 3
+#: TRACE_COUNT builds: the light buffer's answers by kind, then the triangles it tested
+#: (kernels/light_buffer.h).
+TRACE_STAT_LB = 4
+LIGHT_BUFFER_COUNT_FIELDS = ("empty", "nearer", "tested_clear", "blocked", "full", "off_map",
+                             "triangles")
 #: The traversal work counters of TRACE_COUNT builds (kernels/scene.h): ray kinds and fields.
 TRACE_KINDS = ("query", "primary", "secondary", "shadow", "photon", "crossing")
 TRACE_COUNT_FIELDS = ("rays", "traversals", "tlas_nodes", "blas_entries", "blas_nodes",
                       "tri_tests", "hits", "spare")
 TRACE_COUNT_INST = 8
-TRACE_STAT_COUNT = 4
+TRACE_STAT_COUNT = TRACE_STAT_LB + len(LIGHT_BUFFER_COUNT_FIELDS)
 TRACE_STAT_INST = TRACE_STAT_COUNT + len(TRACE_KINDS) * len(TRACE_COUNT_FIELDS)
 TRACE_STATS_LEN = TRACE_STAT_INST + len(TRACE_KINDS) * TRACE_COUNT_INST
 BOUNDS_WG = 256
@@ -485,8 +490,10 @@ class Scene:
         """The work counters since the last reset, per ray kind: ``{kind: {field: n}}`` with
         the fields of :data:`TRACE_COUNT_FIELDS` and ``blas_nodes_by_instance`` (a list; ids
         past the last slot share it), and ``heightfield``: its walks culled whole and spans
-        skipped by the slopes (kernels/traverse_heightfield.h). All zero unless the kernels
-        were built with ``TRACE_COUNT=1`` (``Runtime(defines={"TRACE_COUNT": 1})``).
+        skipped by the slopes (kernels/traverse_heightfield.h), and ``light_buffer``: its
+        answers by kind and the triangles it tested (:data:`LIGHT_BUFFER_COUNT_FIELDS`,
+        kernels/light_buffer.h). All zero unless the kernels were built with ``TRACE_COUNT=1``
+        (``Runtime(defines={"TRACE_COUNT": 1})``).
         Synchronises."""
         st = self.rt.to_host(self.trace_stats, np.uint32, TRACE_STATS_LEN)
         nf = len(TRACE_COUNT_FIELDS)
@@ -499,6 +506,8 @@ class Scene:
             out[kind] = rec
         out["heightfield"] = {"culled": int(st[TRACE_STAT_HF_CULLED]),
                               "skipped_spans": int(st[TRACE_STAT_HF_SKIPPED])}
+        out["light_buffer"] = {f: int(st[TRACE_STAT_LB + i])
+                               for i, f in enumerate(LIGHT_BUFFER_COUNT_FIELDS)}
         return out
 
     # -- kernels' view ----------------------------------------------------------------------

@@ -229,6 +229,43 @@ def test_answers_are_the_bvh_any_hit(rt):
     assert np.array_equal(got[sure, 0] == 1, blocked[sure])
 
 
+def test_counters_say_how_each_query_was_answered(rt):
+    """TRACE_COUNT builds count the map's answers by kind (Scene.trace_counts()
+    ["light_buffer"]): they add up to the queries and agree with the answers given, with a
+    float64 look-up of the origins' cells, and with the triangles the listed cells hold."""
+    from kernels.runtime import Runtime
+
+    counting = Runtime(rt.device, defines={"TRACE_COUNT": 1})
+    sc = clutter(counting)
+    lb = built(counting, sc, 6)   # coarse: full cells too
+    rng = np.random.default_rng(5)
+    n = 4000
+    org = rng.uniform((-2.2, 0.0, -2.2), (2.2, 1.4, 2.2), (n, 3)).astype(np.float32)
+    sc.scene.reset_trace_counts()
+    got = answers(counting, sc, lb, 0, org)[:, 0]
+    c = sc.scene.trace_counts()["light_buffer"]
+    kinds = ("empty", "nearer", "tested_clear", "blocked", "full", "off_map")
+    assert sum(c[k] for k in kinds) == n
+    assert c["blocked"] == (got == 1).sum() > 0
+    assert c["full"] == (got == -1).sum() > 0   # nothing reaches off this map: full cells only
+    assert c["empty"] + c["nearer"] + c["tested_clear"] + c["off_map"] == (got == 0).sum()
+    assert min(c[k] for k in kinds) > 0
+    # float64: the origins' cells (a few on a cell's edge may round the other way)
+    m, cells = lb.maps[0], lb.read(0)
+    o = org.astype(np.float64)
+    cu = o @ m["u"][:3].astype(np.float64) + m["u"][3]
+    cv = o @ m["v"][:3].astype(np.float64) + m["v"][3]
+    on = (cu >= 0) & (cu < m["n_u"]) & (cv >= 0) & (cv < m["n_v"])
+    assert abs(c["off_map"] - (~on).sum()) <= 0.01 * n
+    count = np.zeros(n, np.int64)
+    count[on] = cells["count"][cv[on].astype(int), cu[on].astype(int)]
+    assert abs(c["empty"] - (on & (count == 0)).sum()) <= 0.01 * n
+    assert abs(c["full"] - (count > LB_SLOTS).sum()) <= 0.01 * n
+    # a cell tested clear tests all its triangles, a blocked one at least one
+    tested = count[on & (count > 0) & (count <= LB_SLOTS)]
+    assert c["tested_clear"] + c["blocked"] <= c["triangles"] <= tested.sum() + 0.01 * n * LB_SLOTS
+
+
 def test_rays_off_the_map_walk_the_bvh_once_a_triangle_leaves_it(rt):
     sc = clutter(rt, glass=False)
     lb = built(rt, sc, 32)

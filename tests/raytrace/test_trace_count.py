@@ -94,6 +94,11 @@ def test_stat_slots_match_the_header():
     from kernels.runtime import KERNEL_DIR
 
     text = (KERNEL_DIR / "scene.h").read_text()
+    assert f"#define TRACE_STAT_LB_FIELDS {len(scene_module.LIGHT_BUFFER_COUNT_FIELDS)}\n" in text
     for name in ("TRACE_STAT_OVERFLOW", "TRACE_STAT_COOP_REDO", "TRACE_STAT_HF_CULLED",
-                 "TRACE_STAT_HF_SKIPPED", "TRACE_STAT_COUNT"):
+                 "TRACE_STAT_HF_SKIPPED", "TRACE_STAT_LB"):
         assert f"#define {name} {getattr(scene_module, name)}\n" in text, name
+    assert f"#define TRACE_STAT_COUNT {scene_module.TRACE_STAT_COUNT} " in text
+    lb = (KERNEL_DIR / "light_buffer.h").read_text()   # the answers' slots, in order
+    for i, field in enumerate(scene_module.LIGHT_BUFFER_COUNT_FIELDS):
+        assert f"#define LB_CNT_{field.upper()} {i}\n" in lb, field
