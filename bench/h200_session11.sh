@@ -33,6 +33,8 @@
 #   (slots16) now has 8 and the results' names are swapped.
 # PART slots-pocl: the same A/B on PoCL (this machine's CPUs): the shadow rays' BVH walks
 #   (bench/trace_visits.py's counters) and whole frames, small, the map of 1024 cells on.
+# The patches of the lb and defer parts apply to be8dca8, not to later trees (LB_SLOTS 16, the
+# light buffer's counters): run those parts from a checkout of it (git worktree add DIR be8dca8).
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
