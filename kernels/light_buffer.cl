@@ -12,7 +12,13 @@
  *   light_buffer_raster_big  a work-group per such triangle (a boat's sail), or the whole
  *                        launch, one after the other, for those over LB_MEDIUM_CELLS (the pool's
  *                        floor and walls)
- * The order in which triangles land in a cell's slots varies; what a query answers does not. */
+ *   (both: a triangle that lands in a cell past its LB_SLOTS slots is written to the map's
+ *   overflow region as a (cell, triangle) pair, while it has room)
+ *   light_buffer_overflow_ranges  per map: each cell of more than LB_SLOTS its range of
+ *                        lb_extra (LightBuffer.over_cell's y counts them out)
+ *   light_buffer_overflow_fill  per map: each pair's triangle into its cell's range
+ * The order in which triangles land in a cell's slots and list varies; what a query answers
+ * does not. */
 #include "common.h"
 #include "transform.h"
 #include "light_buffer.h"
@@ -91,9 +97,11 @@ inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restri
     return o;
 }
 
-/* Cell k of the triangle's box: list triangle t there when its footprint meets the cell. */
+/* Cell k of the triangle's box: list triangle t there when its footprint meets the cell (past
+ * the cell's slots: a pair in the map's overflow region, while it has room). */
 inline void lb_insert(const LightBuffer* m, const LbTriangle* o, uint t, int k,
-                      __global int* restrict cells, __global int* restrict lb_slots)
+                      __global int* restrict cells, __global int* restrict lb_slots,
+                      __global int2* restrict lb_pairs)
 {
     const int i = o->i0 + k % o->w, j = o->j0 + k / o->w;
     const float2 clo = (float2)((float)i, (float)j) - m->margin;
@@ -107,7 +115,12 @@ inline void lb_insert(const LightBuffer* m, const LbTriangle* o, uint t, int k,
     }
     const int cell = m->cell_base + j * m->n_u + i;
     const int slot = atomic_inc(cells + 2 * cell);
-    if (slot < LB_SLOTS) lb_slots[cell * LB_SLOTS + slot] = (int)t;
+    if (slot < LB_SLOTS) {
+        lb_slots[cell * LB_SLOTS + slot] = (int)t;
+    } else {
+        const int pair = atomic_inc(cells + 2 * m->over_cell);
+        if (pair < m->over_cap) lb_pairs[m->over_base + pair] = (int2)(cell, (int)t);
+    }
     atomic_max(cells + 2 * cell + 1, float_to_ordered(bound + o->slack));
 }
 
@@ -115,7 +128,8 @@ __kernel void light_buffer_raster(__global const LightBuffer* restrict lb_maps, 
                                   __global const float4* restrict lb_tris, const uint n_tris,
                                   __global const Transform* restrict xforms,
                                   __global int2* restrict lb_cells,
-                                  __global int* restrict lb_slots, __global uint* restrict lb_big)
+                                  __global int* restrict lb_slots, __global uint* restrict lb_big,
+                                  __global int2* restrict lb_pairs)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
@@ -126,7 +140,7 @@ __kernel void light_buffer_raster(__global const LightBuffer* restrict lb_maps, 
         else if (o.n > LB_SMALL_CELLS)   /* medium: from its front */
             lb_big[atomic_inc(cells + 2 * m.big_cell)] = t;
         else
-            for (int k = 0; k < o.n; ++k) lb_insert(&m, &o, t, k, cells, lb_slots);
+            for (int k = 0; k < o.n; ++k) lb_insert(&m, &o, t, k, cells, lb_slots, lb_pairs);
     }
 }
 
@@ -137,7 +151,8 @@ __kernel void light_buffer_raster_big(__global const LightBuffer* restrict lb_ma
                                       const uint n_tris, __global const Transform* restrict xforms,
                                       __global int2* restrict lb_cells,
                                       __global int* restrict lb_slots,
-                                      __global const uint* restrict lb_big)
+                                      __global const uint* restrict lb_big,
+                                      __global int2* restrict lb_pairs)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
@@ -147,13 +162,49 @@ __kernel void light_buffer_raster_big(__global const LightBuffer* restrict lb_ma
         const uint t = lb_big[n_tris - 1u - (uint)b];
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, false);
         for (int k = get_global_id(0); k < o.n; k += get_global_size(0))
-            lb_insert(&m, &o, t, k, cells, lb_slots);
+            lb_insert(&m, &o, t, k, cells, lb_slots, lb_pairs);
     }
     for (int b = get_group_id(0); b < n_big.x; b += get_num_groups(0)) {   /* uniform */
         const uint t = lb_big[b];
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, false);
         for (int k = get_local_id(0); k < o.n; k += get_local_size(0))
-            lb_insert(&m, &o, t, k, cells, lb_slots);
+            lb_insert(&m, &o, t, k, cells, lb_slots, lb_pairs);
+    }
+}
+
+/* After both rasters: each cell of map `light` that met more than LB_SLOTS triangles gets a
+ * range of lb_extra for the rest, from the map's region (lb_over[cell] = (first entry, 0)),
+ * unless the pairs overflowed the region (its cells say "unknown": light_buffer_blocked). */
+__kernel void light_buffer_overflow_ranges(__global const LightBuffer* restrict lb_maps,
+                                           const uint light, __global int2* restrict lb_cells,
+                                           __global int2* restrict lb_over)
+{
+    const LightBuffer m = lb_maps[light];
+    __global int* cells = (__global int*)lb_cells;
+    if (lb_cells[m.over_cell].x > m.over_cap) return;
+    const int n = m.n_u * m.n_v;
+    for (int c = get_global_id(0); c < n; c += get_global_size(0)) {
+        const int cell = m.cell_base + c, listed = lb_cells[cell].x;
+        if (listed > LB_SLOTS)
+            lb_over[cell] = (int2)(m.over_base
+                                   + atomic_add(cells + 2 * m.over_cell + 1, listed - LB_SLOTS),
+                                   0);
+    }
+}
+
+/* Then each pair's triangle into its cell's range, in the order the work-items come. */
+__kernel void light_buffer_overflow_fill(__global const LightBuffer* restrict lb_maps,
+                                         const uint light, __global const int2* restrict lb_cells,
+                                         __global const int2* restrict lb_pairs,
+                                         __global int2* restrict lb_over,
+                                         __global int* restrict lb_extra)
+{
+    const LightBuffer m = lb_maps[light];
+    const int n = lb_cells[m.over_cell].x;
+    if (n > m.over_cap) return;
+    for (int k = get_global_id(0); k < n; k += get_global_size(0)) {
+        const int2 p = lb_pairs[m.over_base + k];
+        lb_extra[lb_over[p.x].x + atomic_inc((__global int*)(lb_over + p.x) + 1)] = p.y;
     }
 }
 

@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-04 (twelfth session)" rows. Usage:
+#   bench/h200_session12.sh OUTDIR PART
+# PART stack: diagnoses (copies of the tree) of what the shadow stage's two BVH walks cost, the
+#   any-hit walk that full light-buffer cells fall back to and the crossings' closest hit
+#   through trace_closest_only (TLAS and BLAS code beside the height field's walk): cells of up
+#   to 64 or 256 triangles (s64, s256: fewer walks), the crossings through the height field's
+#   walk alone (hfonly: bench/patches/shadow_crossing_hf_only.patch, the same image where the
+#   crossing instance is the height field, as in the baseline scene), no fallback walk
+#   (nofallback: rays of full cells unshadowed), neither walk (nostack) and neither with cells
+#   of 256 (s256nostack: wrong only in the cells of more). The baseline scene per depth at
+#   1920x1080, the tree first and last; then each one's registers and stack
+#   (bench/kernel_resources.py).
+# PART frames: whole frames of the baseline scene, the tree against nostack, levels overlapped
+#   (as the frame runs) and not (--no-overlap), twice in turns; then each at 3840x2160.
+# The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+set -uo pipefail
+out=${1:?OUTDIR}
+part=${2:?PART}
+mkdir -p "$out"
+source "$(dirname "$0")/h200_lib.sh"
+# variant_slots DIR N [SED FILE ...]: variant_tree whose light-buffer cells list N triangles
+variant_slots() {
+    local w=$1 n=$2; shift 2
+    variant_tree "$w" "s/^#define LB_SLOTS 16\$/#define LB_SLOTS $n/" kernels/light_buffer.h \
+        "s/^LB_SLOTS = 16 /LB_SLOTS = $n /" raytrace/light_buffer.py "$@"
+}
+nofallback='s/trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW)/false/'
+hf_only() { (cd "$1" && patch -p1 -s < "$OLDPWD/bench/patches/shadow_crossing_hf_only.patch"); }
+case $part in
+stack)
+    variant_slots /tmp/s64 64
+    variant_slots /tmp/s256 256
+    variant_tree /tmp/hfonly && hf_only /tmp/hfonly
+    variant_tree /tmp/nofallback "$nofallback" kernels/render_shadow.h
+    variant_tree /tmp/nostack "$nofallback" kernels/render_shadow.h && hf_only /tmp/nostack
+    variant_slots /tmp/s256nostack 256 "$nofallback" kernels/render_shadow.h \
+        && hf_only /tmp/s256nostack
+    g="$f $static --per-depth --no-overlap"
+    lb bench frame $g --out "$out/static_pd_tree_1" | tail -1
+    for v in s64 s256 hfonly nofallback nostack s256nostack; do
+        in_tree /tmp/$v bench frame $g --out "$out/static_pd_$v" 2>&1 | tail -1
+    done
+    lb bench frame $g --out "$out/static_pd_tree_2" | tail -1
+    for v in tree nostack s256nostack; do
+        w=$PWD; [ $v = tree ] || w=/tmp/$v
+        (cd $w && PYTHONPATH=/tmp/site:$w timeout 120 python3 bench/kernel_resources.py \
+            --scene bench/scenes/pool_static_boat.toml --out "$out/resources_$v.json" | tail -1)
+    done
+    ;;
+frames)
+    # whole frames at 1920x1080, as the frame runs them (levels overlapped) and with each
+    # level's shadow rays a launch of their own (--no-overlap), the tree against nostack
+    variant_tree /tmp/nostack "$nofallback" kernels/render_shadow.h && hf_only /tmp/nostack
+    for rep in 1 2; do
+        for o in "" "--no-overlap"; do
+            n=${o:+_noov}
+            lb bench frame $f $static $o --out "$out/static_tree${n}_$rep" | tail -1
+            in_tree /tmp/nostack bench frame $f $static $o --out "$out/static_nostack${n}_$rep" \
+                | tail -1
+        done
+    done
+    in_tree /tmp/nostack bench frame $k $static --out "$out/static4k_nostack" | tail -1
+    lb bench frame $k $static --out "$out/static4k_tree" | tail -1
+    ;;
+*)
+    echo "unknown PART $part" >&2
+    exit 2
+    ;;
+esac
