@@ -13,6 +13,9 @@
 #   (bench/kernel_resources.py).
 # PART frames: whole frames of the baseline scene, the tree against nostack, levels overlapped
 #   (as the frame runs) and not (--no-overlap), twice in turns; then each at 3840x2160.
+# PART mapped: the shadow kernels with no BVH walk (SHADOW_MAPPED), as the tree takes them
+#   (--mapped-shadows on) against those that walk (off): their device tests, the baseline scene
+#   per depth and whole at 1920x1080 in turns twice, at 3840x2160, and the pool whole.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -62,6 +65,23 @@ frames)
     done
     in_tree /tmp/nostack bench frame $k $static --out "$out/static4k_nostack" | tail -1
     lb bench frame $k $static --out "$out/static4k_tree" | tail -1
+    ;;
+mapped)
+    # the tree's mapped shadow kernels against those that walk (--mapped-shadows off), after
+    # their device tests
+    timeout 240 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_mapped_shadows.py \
+        tests/raytrace/test_light_buffer.py 2>&1 | tail -2
+    for rep in 1 2; do
+        for m in on off; do
+            lb bench frame $f $static --per-depth --no-overlap --mapped-shadows $m \
+                --out "$out/static_pd_${m}_$rep" | tail -1
+            lb bench frame $f $static --mapped-shadows $m --out "$out/static_${m}_$rep" | tail -1
+        done
+    done
+    for m in on off; do
+        lb bench frame $k $static --mapped-shadows $m --out "$out/static4k_$m" | tail -1
+        lb bench frame $f --mapped-shadows $m --out "$out/pool_$m" | tail -1
+    done
     ;;
 *)
     echo "unknown PART $part" >&2
