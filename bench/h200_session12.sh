@@ -16,6 +16,10 @@
 # PART mapped: the shadow kernels with no BVH walk (SHADOW_MAPPED), as the tree takes them
 #   (--mapped-shadows on) against those that walk (off): their device tests, the baseline scene
 #   per depth and whole at 1920x1080 in turns twice, at 3840x2160, and the pool whole.
+# PART boxes: the mapped kernels with a long list's triangles tested first against their
+#   footprint's box (as the tree has it) against every cell's so (boxall) and the walking
+#   kernels (--mapped-shadows off); per depth once, whole frames twice in turns, 3840x2160 and
+#   the pool whole.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -77,6 +81,28 @@ mapped)
                 --out "$out/static_pd_${m}_$rep" | tail -1
             lb bench frame $f $static --mapped-shadows $m --out "$out/static_${m}_$rep" | tail -1
         done
+    done
+    for m in on off; do
+        lb bench frame $k $static --mapped-shadows $m --out "$out/static4k_$m" | tail -1
+        lb bench frame $f --mapped-shadows $m --out "$out/pool_$m" | tail -1
+    done
+    ;;
+boxes)
+    # the mapped kernels with each long list's triangles boxed first (the tree: cells of more
+    # than LB_SLOTS) against boxing every cell's (boxall: LB_BOX_FROM 0) and the walking
+    # kernels (--mapped-shadows off), after the mapped device tests
+    timeout 200 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_mapped_shadows.py \
+        2>&1 | grep -E "^E|passed|failed" | head -20
+    variant_tree /tmp/boxall 's/^#define LB_BOX_FROM LB_SLOTS$/#define LB_BOX_FROM 0/' \
+        kernels/light_buffer.h
+    g="$f $static --per-depth --no-overlap"
+    lb bench frame $g --out "$out/static_pd_on" | tail -1
+    in_tree /tmp/boxall bench frame $g --out "$out/static_pd_boxall" | tail -1
+    lb bench frame $g --mapped-shadows off --out "$out/static_pd_off" | tail -1
+    for rep in 1 2; do
+        lb bench frame $f $static --out "$out/static_on_$rep" | tail -1
+        in_tree /tmp/boxall bench frame $f $static --out "$out/static_boxall_$rep" | tail -1
+        lb bench frame $f $static --mapped-shadows off --out "$out/static_off_$rep" | tail -1
     done
     for m in on off; do
         lb bench frame $k $static --mapped-shadows $m --out "$out/static4k_$m" | tail -1

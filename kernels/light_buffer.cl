@@ -5,8 +5,8 @@
  *                        them (LightBuffer.outside_cell, big_cell): 0
  *   light_buffer_raster  per map: a work-item per triangle moves it to world space by its
  *                        instance's transform row (as the TLAS build and the shader do), projects
- *                        it across the light and lists it in every cell its footprint (grown by
- *                        the margin) touches, raising the cell's depth bound to the most the
+ *                        it across the light (its footprint's box into lb_boxes) and lists it in
+ *                        every cell its footprint (grown by the margin) touches, raising the cell's depth bound to the most the
  *                        triangle's plane reaches over the cell (or its nearest vertex); a
  *                        triangle over more than LB_SMALL_CELLS cells is left to
  *   light_buffer_raster_big  a work-group per such triangle (a boat's sail), or the whole
@@ -53,6 +53,7 @@ typedef struct {
     float s0, smax;    /* depth of a, the nearest vertex's */
     float slack;       /* the bound's growth: rounding */
     float2 g;          /* d(depth)/d(cu, cv), where plane */
+    float4 box;        /* the footprint's box grown by the margin: lo.xy, hi.xy (lb_boxes) */
     bool plane;
     int i0, j0, w, n;  /* first cell, cells across, cells in the box (0: off the map) */
 } LbTriangle;
@@ -63,6 +64,7 @@ inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restri
 {
     LbTriangle o;
     o.n = 0;
+    o.box = (float4)(INFINITY, INFINITY, -INFINITY, -INFINITY);   /* nothing: not listed */
     const float4 q0 = lb_tris[3 * t], q1 = lb_tris[3 * t + 1], q2 = lb_tris[3 * t + 2];
     const Transform x = xforms[as_int(q0.w)];
     const float3 p0 = xform_point(x, q0.xyz), p1 = xform_point(x, q1.xyz),
@@ -78,6 +80,7 @@ inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restri
     const float2 lo = fmin(o.a, fmin(o.b, o.c)) - m->margin;
     const float2 hi = fmax(o.a, fmax(o.b, o.c)) + m->margin;
     if (!(all(isfinite(lo)) && all(isfinite(hi)) && isfinite(o.smax))) return o;
+    o.box = (float4)(lo, hi);
     if (count_outside
         && (lo.x < 0.0f || lo.y < 0.0f || hi.x >= (float)m->n_u || hi.y >= (float)m->n_v))
         atomic_inc(cells + 2 * m->outside_cell);
@@ -129,12 +132,14 @@ __kernel void light_buffer_raster(__global const LightBuffer* restrict lb_maps, 
                                   __global const Transform* restrict xforms,
                                   __global int2* restrict lb_cells,
                                   __global int* restrict lb_slots, __global uint* restrict lb_big,
-                                  __global int2* restrict lb_pairs)
+                                  __global int2* restrict lb_pairs,
+                                  __global float4* restrict lb_boxes)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
     for (uint t = get_global_id(0); t < n_tris; t += get_global_size(0)) {
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, true);
+        lb_boxes[m.box_base + t] = o.box;
         if (o.n > LB_MEDIUM_CELLS)   /* huge: from the list's back */
             lb_big[n_tris - 1u - atomic_inc(cells + 2 * m.big_cell + 1)] = t;
         else if (o.n > LB_SMALL_CELLS)   /* medium: from its front */

@@ -22,6 +22,11 @@
 #define LB_SMALL_CELLS 32
 /* one over more cells by the whole launch */
 #define LB_MEDIUM_CELLS 4096
+/* a cell of more triangles has each tested first against its footprint's box in the map
+   (LightBuffer.box_base): most of a long list's small triangles miss the origin's point */
+#ifndef LB_BOX_FROM
+#define LB_BOX_FROM LB_SLOTS
+#endif
 /* light_buffer_blocked's answers */
 #define LB_UNKNOWN (-1)
 #define LB_CLEAR 0
@@ -45,20 +50,23 @@ typedef struct {
                           met (each a pair in lb_pairs), y: of those given a place in lb_extra */
     int over_base;     /* the map's overflow region: lb_pairs and lb_extra from over_base, */
     int over_cap;      /* over_cap entries; more met than that: the full cells say "unknown" */
-    int pad0, pad1;
+    int box_base;      /* lb_boxes[box_base + t]: listed triangle t's footprint in the map's cell
+                          coordinates, grown by the margin (lo.xy, hi.xy) */
+    int pad;
 } LightBuffer;
 
 /* The kernel parameters of a stage that reads the light buffer (shadow rays), and their names.
  * lb_cells[c]: x = triangles listed (the first LB_SLOTS in lb_slots[c * LB_SLOTS ..], the rest
  * from lb_extra[lb_over[c].x]), y = float_to_ordered of the nearest-to-the-light depth any of
  * them reaches over the cell; lb_tris: three float4 per listed triangle, its object-space
- * vertices, p0.w = as_float(instance).
+ * vertices, p0.w = as_float(instance); lb_boxes: each map's footprints of them.
  */
 #define LIGHT_BUFFER_PARAMS                                                                   \
     __global const LightBuffer* restrict lb_maps, __global const int2* restrict lb_cells,   \
         __global const int* restrict lb_slots, __global const float4* restrict lb_tris,     \
-        __global const int2* restrict lb_over, __global const int* restrict lb_extra
-#define LIGHT_BUFFER_ARGS lb_maps, lb_cells, lb_slots, lb_tris, lb_over, lb_extra
+        __global const int2* restrict lb_over, __global const int* restrict lb_extra,      \
+        __global const float4* restrict lb_boxes
+#define LIGHT_BUFFER_ARGS lb_maps, lb_cells, lb_slots, lb_tris, lb_over, lb_extra, lb_boxes
 
 /* TRACE_COUNT builds count each answer's kind (scene.h TRACE_STAT_LB: Scene.trace_counts()
  * ["light_buffer"]); others nothing */
@@ -112,8 +120,13 @@ inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* re
     }
     int inst = -1;
     TraceRay r;
+    const bool boxed = c.x > LB_BOX_FROM;
     for (int k = 0; k < c.x; ++k) {
         const int t = k < LB_SLOTS ? lb_slots[cell * LB_SLOTS + k] : lb_extra[extra + k];
+        if (boxed) {   /* the origin's point off the triangle's footprint: it cannot block */
+            const float4 b = lb_boxes[m.box_base + t];
+            if (cu < b.x || cv < b.y || cu > b.z || cv > b.w) continue;
+        }
         const float4 p0 = lb_tris[3 * t], p1 = lb_tris[3 * t + 1], p2 = lb_tris[3 * t + 2];
         if (as_int(p0.w) != inst) {
             inst = as_int(p0.w);

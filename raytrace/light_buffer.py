@@ -36,8 +36,8 @@ LIGHT_BUFFER = np.dtype([("u", _F4), ("v", _F4), ("toward", _F4), ("n_u", np.int
                          ("n_v", np.int32), ("cell_base", np.int32), ("outside_cell", np.int32),
                          ("big_cell", np.int32), ("margin", np.float32),
                          ("depth_slack", np.float32), ("over_cell", np.int32),
-                         ("over_base", np.int32), ("over_cap", np.int32), ("pad0", np.int32),
-                         ("pad1", np.int32)])
+                         ("over_base", np.int32), ("over_cap", np.int32), ("box_base", np.int32),
+                         ("pad", np.int32)])
 LB_SLOTS = 16           #: kernels/light_buffer.h
 #: Most cells along a map's side.
 MAX_CELLS = 8192
@@ -76,7 +76,7 @@ class LightBuffer:
         self.over_cap = 0              #: each map's overflow region (entries)
         self._counters = None          # the last build's counters read: (builds, PinnedRing)
         self._complete = False         # what the last counters that arrived said
-        self._alloc(np.zeros((1, 4), np.float32), 1, 0)
+        self._alloc(np.zeros((1, 4), np.float32), 1, 0, 0)
         self._kernels = None           # built with the first map (none: no program to build)
         # the big triangles' launch: a few work-groups per compute unit share each one's cells
         self._big_items = 4 * 256 * rt.device.max_compute_units
@@ -91,7 +91,7 @@ class LightBuffer:
                                     ("overflow_fill", "lists")))
         return self._kernels
 
-    def _alloc(self, tris: np.ndarray, n_cells: int, n_over: int) -> None:
+    def _alloc(self, tris: np.ndarray, n_cells: int, n_over: int, n_boxes: int) -> None:
         rt = self.rt
         self.maps_buf = rt.to_device(self.maps)
         self.tris_buf = rt.to_device(tris)
@@ -101,6 +101,7 @@ class LightBuffer:
         self.over_buf = rt.buffer(8 * max(n_cells, 1))         # a full cell's list: first, filled
         self.pairs_buf = rt.buffer(8 * max(n_over, 1))         # (cell, triangle) past the slots
         self.extra_buf = rt.buffer(4 * max(n_over, 1))         # the full cells' lists
+        self.boxes_buf = rt.buffer(16 * max(n_boxes, 1))      # each map's footprint boxes
         self._counters = None
         self._complete = False
 
@@ -113,7 +114,7 @@ class LightBuffer:
         """``LIGHT_BUFFER_PARAMS`` (kernels/light_buffer.h) by name."""
         return {"lb_maps": self.maps_buf, "lb_cells": self.cells_buf,
                 "lb_slots": self.slots_buf, "lb_tris": self.tris_buf, "lb_over": self.over_buf,
-                "lb_extra": self.extra_buf}
+                "lb_extra": self.extra_buf, "lb_boxes": self.boxes_buf}
 
     # -- planning --------------------------------------------------------------------------
     def plan(self, render_scene, any_hit_mask: int) -> bool:
@@ -148,11 +149,13 @@ class LightBuffer:
                     self.maps[i][name] = n_cells + _COUNTERS * k + f
                 self.maps[i]["over_base"] = k * self.over_cap
                 self.maps[i]["over_cap"] = self.over_cap
+                self.maps[i]["box_base"] = k * (len(tris) // 3)
             n_cells += _COUNTERS * len(directional)
         self.n_tris = 0 if self.reason else len(tris) // 3
         self.n_cells = n_cells
         n_over = self.over_cap * len(directional) if self.n_tris else 0
-        self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells, n_over)
+        self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells, n_over,
+                    self.n_tris * len(directional))
         return True
 
     def _triangles(self, render_scene, masks, mask: int) -> tuple[np.ndarray, str]:
@@ -241,7 +244,7 @@ class LightBuffer:
         bufs = {"lb_maps": self.maps_buf, "lb_tris": self.tris_buf, "xforms": transform_buffer,
                 "lb_cells": self.cells_buf, "lb_slots": self.slots_buf, "lb_big": self.big_buf,
                 "lb_pairs": self.pairs_buf}
-        raster.bind(**bufs, n_tris=self.n_tris)
+        raster.bind(**bufs, n_tris=self.n_tris, lb_boxes=self.boxes_buf)
         raster_big.bind(**bufs, n_tris=self.n_tris)
         ranges.bind(lb_maps=self.maps_buf, lb_cells=self.cells_buf, lb_over=self.over_buf)
         fill.bind(lb_maps=self.maps_buf, lb_cells=self.cells_buf, lb_pairs=self.pairs_buf,

@@ -214,9 +214,10 @@ def brute_force_blocked(world, org, toward) -> np.ndarray:
     return hit.any(1), (near & (t > 0)).any(1)
 
 
-def test_answers_are_the_bvh_any_hit(rt):
+@pytest.mark.parametrize("cells", [40, 6])   # 6: long lists, their triangles boxed first
+def test_answers_are_the_bvh_any_hit(rt, cells):
     sc = clutter(rt)
-    lb = built(rt, sc, 40)
+    lb = built(rt, sc, cells)
     rng = np.random.default_rng(7)
     world, _ = world_triangles(sc, lb)
     # points on the floor (offset up), on the triangles, and in the air
@@ -231,6 +232,12 @@ def test_answers_are_the_bvh_any_hit(rt):
     known = got[:, 0] >= 0
     assert known.all()   # a complete map: its full cells answer from their lists
     assert np.array_equal(got[known, 0], got[known, 1])   # the BVH's answer, bit for bit
+    if cells == 6:   # many origins in a long list's cell
+        m, count = lb.maps[0], lb.read(0)["count"]
+        cu = (org @ m["u"][:3] + m["u"][3]).astype(int)
+        cv = (org @ m["v"][:3] + m["v"][3]).astype(int)
+        on = (cu >= 0) & (cu < m["n_u"]) & (cv >= 0) & (cv < m["n_v"])
+        assert (count[cv[on], cu[on]] > LB_SLOTS).mean() > 0.1
     assert 0.1 < got[known, 1].mean() < 0.9               # both kinds of answer occur
     toward = -np.asarray(SUN, np.float64) / np.linalg.norm(SUN)
     blocked, near = brute_force_blocked(world, org.astype(np.float64), toward)
