@@ -66,10 +66,6 @@ def add_arguments(p) -> None:
                    help="a shadow ray that climbs faster than the water's slopes crosses it at "
                         "most once: leave out the walks that can find nothing, or (off) walk "
                         "them (RenderSettings.one_crossing; the same image)")
-    p.add_argument("--mapped-shadows", choices=("on", "off"), default="on",
-                   help="where the light buffer answers every shadow ray and the crossings are "
-                        "the water's, the shadow launches take the kernels with no BVH walk, or "
-                        "(off) those that walk (RenderSettings.mapped_shadows; the same image)")
     p.add_argument("--light-buffer", type=int, default=None, metavar="CELLS",
                    help="cells along each directional light's map of what blocks it "
                         "(RenderSettings.light_buffer: the shadow rays' any-hit query without a "
@@ -183,7 +179,6 @@ def run(args) -> int:
             world.renderer.set_cost_bins(bins_arg == "on")
         world.renderer.set_direct_crossings(getattr(args, "direct_crossings", "on") == "on")
         world.renderer.set_one_crossing(getattr(args, "one_crossing", "on") == "on")
-        world.renderer.set_mapped_shadows(getattr(args, "mapped_shadows", "on") == "on")
         for _ in range(args.warmup):
             world.frame(args.frame_time)
         # latency: one frame at a time, the host waiting on each image
@@ -238,8 +233,6 @@ def run(args) -> int:
                "direct_crossings": world.renderer.settings.direct_crossings,
                "one_crossing": world.renderer.settings.one_crossing,
                "light_buffer": world.renderer.settings.light_buffer,
-               "mapped_shadows": world.renderer.settings.mapped_shadows,
-               "mapped_shadows_used": world.renderer.mapped_shadows_used,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,
                "rays_per_depth": " ".join(str(n) for n in st.rays_per_depth),

@@ -5,20 +5,14 @@
  *                        them (LightBuffer.outside_cell, big_cell): 0
  *   light_buffer_raster  per map: a work-item per triangle moves it to world space by its
  *                        instance's transform row (as the TLAS build and the shader do), projects
- *                        it across the light (its footprint's box into lb_boxes) and lists it in
- *                        every cell its footprint (grown by the margin) touches, raising the cell's depth bound to the most the
+ *                        it across the light and lists it in every cell its footprint (grown by
+ *                        the margin) touches, raising the cell's depth bound to the most the
  *                        triangle's plane reaches over the cell (or its nearest vertex); a
  *                        triangle over more than LB_SMALL_CELLS cells is left to
  *   light_buffer_raster_big  a work-group per such triangle (a boat's sail), or the whole
  *                        launch, one after the other, for those over LB_MEDIUM_CELLS (the pool's
  *                        floor and walls)
- *   (both: a triangle that lands in a cell past its LB_SLOTS slots is written to the map's
- *   overflow region as a (cell, triangle) pair, while it has room)
- *   light_buffer_overflow_ranges  per map: each cell of more than LB_SLOTS its range of
- *                        lb_extra (LightBuffer.over_cell's y counts them out)
- *   light_buffer_overflow_fill  per map: each pair's triangle into its cell's range
- * The order in which triangles land in a cell's slots and list varies; what a query answers
- * does not. */
+ * The order in which triangles land in a cell's slots varies; what a query answers does not. */
 #include "common.h"
 #include "transform.h"
 #include "light_buffer.h"
@@ -53,7 +47,6 @@ typedef struct {
     float s0, smax;    /* depth of a, the nearest vertex's */
     float slack;       /* the bound's growth: rounding */
     float2 g;          /* d(depth)/d(cu, cv), where plane */
-    float4 box;        /* the footprint's box grown by the margin: lo.xy, hi.xy (lb_boxes) */
     bool plane;
     int i0, j0, w, n;  /* first cell, cells across, cells in the box (0: off the map) */
 } LbTriangle;
@@ -64,7 +57,6 @@ inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restri
 {
     LbTriangle o;
     o.n = 0;
-    o.box = (float4)(INFINITY, INFINITY, -INFINITY, -INFINITY);   /* nothing: not listed */
     const float4 q0 = lb_tris[3 * t], q1 = lb_tris[3 * t + 1], q2 = lb_tris[3 * t + 2];
     const Transform x = xforms[as_int(q0.w)];
     const float3 p0 = xform_point(x, q0.xyz), p1 = xform_point(x, q1.xyz),
@@ -80,7 +72,6 @@ inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restri
     const float2 lo = fmin(o.a, fmin(o.b, o.c)) - m->margin;
     const float2 hi = fmax(o.a, fmax(o.b, o.c)) + m->margin;
     if (!(all(isfinite(lo)) && all(isfinite(hi)) && isfinite(o.smax))) return o;
-    o.box = (float4)(lo, hi);
     if (count_outside
         && (lo.x < 0.0f || lo.y < 0.0f || hi.x >= (float)m->n_u || hi.y >= (float)m->n_v))
         atomic_inc(cells + 2 * m->outside_cell);
@@ -100,11 +91,9 @@ inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restri
     return o;
 }
 
-/* Cell k of the triangle's box: list triangle t there when its footprint meets the cell (past
- * the cell's slots: a pair in the map's overflow region, while it has room). */
+/* Cell k of the triangle's box: list triangle t there when its footprint meets the cell. */
 inline void lb_insert(const LightBuffer* m, const LbTriangle* o, uint t, int k,
-                      __global int* restrict cells, __global int* restrict lb_slots,
-                      __global int2* restrict lb_pairs)
+                      __global int* restrict cells, __global int* restrict lb_slots)
 {
     const int i = o->i0 + k % o->w, j = o->j0 + k / o->w;
     const float2 clo = (float2)((float)i, (float)j) - m->margin;
@@ -118,12 +107,7 @@ inline void lb_insert(const LightBuffer* m, const LbTriangle* o, uint t, int k,
     }
     const int cell = m->cell_base + j * m->n_u + i;
     const int slot = atomic_inc(cells + 2 * cell);
-    if (slot < LB_SLOTS) {
-        lb_slots[cell * LB_SLOTS + slot] = (int)t;
-    } else {
-        const int pair = atomic_inc(cells + 2 * m->over_cell);
-        if (pair < m->over_cap) lb_pairs[m->over_base + pair] = (int2)(cell, (int)t);
-    }
+    if (slot < LB_SLOTS) lb_slots[cell * LB_SLOTS + slot] = (int)t;
     atomic_max(cells + 2 * cell + 1, float_to_ordered(bound + o->slack));
 }
 
@@ -131,21 +115,18 @@ __kernel void light_buffer_raster(__global const LightBuffer* restrict lb_maps, 
                                   __global const float4* restrict lb_tris, const uint n_tris,
                                   __global const Transform* restrict xforms,
                                   __global int2* restrict lb_cells,
-                                  __global int* restrict lb_slots, __global uint* restrict lb_big,
-                                  __global int2* restrict lb_pairs,
-                                  __global float4* restrict lb_boxes)
+                                  __global int* restrict lb_slots, __global uint* restrict lb_big)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
     for (uint t = get_global_id(0); t < n_tris; t += get_global_size(0)) {
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, true);
-        lb_boxes[m.box_base + t] = o.box;
         if (o.n > LB_MEDIUM_CELLS)   /* huge: from the list's back */
             lb_big[n_tris - 1u - atomic_inc(cells + 2 * m.big_cell + 1)] = t;
         else if (o.n > LB_SMALL_CELLS)   /* medium: from its front */
             lb_big[atomic_inc(cells + 2 * m.big_cell)] = t;
         else
-            for (int k = 0; k < o.n; ++k) lb_insert(&m, &o, t, k, cells, lb_slots, lb_pairs);
+            for (int k = 0; k < o.n; ++k) lb_insert(&m, &o, t, k, cells, lb_slots);
     }
 }
 
@@ -156,8 +137,7 @@ __kernel void light_buffer_raster_big(__global const LightBuffer* restrict lb_ma
                                       const uint n_tris, __global const Transform* restrict xforms,
                                       __global int2* restrict lb_cells,
                                       __global int* restrict lb_slots,
-                                      __global const uint* restrict lb_big,
-                                      __global int2* restrict lb_pairs)
+                                      __global const uint* restrict lb_big)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
@@ -167,49 +147,13 @@ __kernel void light_buffer_raster_big(__global const LightBuffer* restrict lb_ma
         const uint t = lb_big[n_tris - 1u - (uint)b];
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, false);
         for (int k = get_global_id(0); k < o.n; k += get_global_size(0))
-            lb_insert(&m, &o, t, k, cells, lb_slots, lb_pairs);
+            lb_insert(&m, &o, t, k, cells, lb_slots);
     }
     for (int b = get_group_id(0); b < n_big.x; b += get_num_groups(0)) {   /* uniform */
         const uint t = lb_big[b];
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, false);
         for (int k = get_local_id(0); k < o.n; k += get_local_size(0))
-            lb_insert(&m, &o, t, k, cells, lb_slots, lb_pairs);
-    }
-}
-
-/* After both rasters: each cell of map `light` that met more than LB_SLOTS triangles gets a
- * range of lb_extra for the rest, from the map's region (lb_over[cell] = (first entry, 0)),
- * unless the pairs overflowed the region (its cells say "unknown": light_buffer_blocked). */
-__kernel void light_buffer_overflow_ranges(__global const LightBuffer* restrict lb_maps,
-                                           const uint light, __global int2* restrict lb_cells,
-                                           __global int2* restrict lb_over)
-{
-    const LightBuffer m = lb_maps[light];
-    __global int* cells = (__global int*)lb_cells;
-    if (lb_cells[m.over_cell].x > m.over_cap) return;
-    const int n = m.n_u * m.n_v;
-    for (int c = get_global_id(0); c < n; c += get_global_size(0)) {
-        const int cell = m.cell_base + c, listed = lb_cells[cell].x;
-        if (listed > LB_SLOTS)
-            lb_over[cell] = (int2)(m.over_base
-                                   + atomic_add(cells + 2 * m.over_cell + 1, listed - LB_SLOTS),
-                                   0);
-    }
-}
-
-/* Then each pair's triangle into its cell's range, in the order the work-items come. */
-__kernel void light_buffer_overflow_fill(__global const LightBuffer* restrict lb_maps,
-                                         const uint light, __global const int2* restrict lb_cells,
-                                         __global const int2* restrict lb_pairs,
-                                         __global int2* restrict lb_over,
-                                         __global int* restrict lb_extra)
-{
-    const LightBuffer m = lb_maps[light];
-    const int n = lb_cells[m.over_cell].x;
-    if (n > m.over_cap) return;
-    for (int k = get_global_id(0); k < n; k += get_global_size(0)) {
-        const int2 p = lb_pairs[m.over_base + k];
-        lb_extra[lb_over[p.x].x + atomic_inc((__global int*)(lb_over + p.x) + 1)] = p.y;
+            lb_insert(&m, &o, t, k, cells, lb_slots);
     }
 }
 

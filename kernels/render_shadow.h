@@ -9,17 +9,6 @@
 #include "traverse_coop.h"
 #include "light_buffer.h"
 
-/* SHADOW_MAPPED=1: the shadow kernels' flavour for a frame whose light buffer answers every
-   shadow ray (each light directional with a complete map: raytrace/light_buffer.py
-   LightBuffer.complete) and whose crossings are all of the height field's instance
-   (RenderParams.crossing_instance): the opaque query is the map's alone and each crossing the
-   height field's walk alone, so no BVH walk and no traversal stack is compiled in; the same
-   answers, so the same image (raytrace/render.py picks it). On the H200 the stack-free kernels
-   took the baseline scene's shadow rays from 0.56 to 0.40 ms (BENCHMARKS.md, twelfth session). */
-#ifndef SHADOW_MAPPED
-#define SHADOW_MAPPED 0
-#endif
-
 inline float smooth01(float e0, float e1, float x)
 {
     const float t = clamp((x - e0) / fmax(e1 - e0, 1e-7f), 0.0f, 1.0f);
@@ -45,18 +34,14 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFE
                                    __constant const RenderParams* prm, uint light, float3 org,
                                    float3 dir, float tmax, int medium)
 {
-    const int mapped = light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, org, dir, tmax,
-                                            trace_stats);
-#if SHADOW_MAPPED
-    if (mapped == LB_BLOCKED) return (float3)(0.0f);   /* complete maps: never unknown */
-#else
     /* one any-hit call site for both cases (one traversal less inlined) */
     const uint opaque = prm->transmissive_shadows ? RENDER_MASK_OPAQUE : ~0u;
+    const int mapped = light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, org, dir, tmax,
+                                            trace_stats);
     if (mapped == LB_BLOCKED
         || (mapped == LB_UNKNOWN
             && trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW)))
         return (float3)(0.0f);
-#endif
     if (!prm->transmissive_shadows) return (float3)(1.0f);
     /* a ray that climbs faster than the water's slopes (hf_climbs) crosses it at most once,
        upward: from over the surface it crosses nothing, and after an exit nothing more */
@@ -72,13 +57,8 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFE
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
         Hit h = {INFINITY, 0.0f, 0.0f, -1, -1};
         if (!(climbs && medium < 0 && (k || over)))
-#if SHADOW_MAPPED
-            h = trace_closest_heightfield(SCENE_ARGS, org, dir, 0.0f, tmax, ci,
-                                          TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
-#else
             h = trace_closest_only(TRACE_ARGS, org, dir, 0.0f, tmax, RENDER_MASK_TRANSMISSIVE, ci,
                                    TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
-#endif
         if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;

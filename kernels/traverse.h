@@ -484,50 +484,30 @@ TRACE_INLINE TraceRay trace_object_ray(__global const Instance* ins, float3 org,
     return trace_object_ray_od(ins, org, dir, &o, &d);
 }
 
-/* Instance id's BLAS, or the height field's walk when its mesh is hf_mesh (heightfield_only:
-   the caller knows it is; no BLAS walk), for a world ray: shrinks *tmax and records the hit as
-   trace_blas; nothing for an instance without a BLAS. `work`, `inst_work`: the counters of a
-   TRACE_COUNT build (unused otherwise). */
-TRACE_INLINE bool trace_instance_walk(SCENE_PARAMS, int id, int hf_mesh, float3 org, float3 dir,
-                                      float tmin, float* tmax, bool any, Hit* hit, uint* work,
-                                      uint* inst_work, const bool heightfield_only) {
+/* Instance id's BLAS, or the height field's walk when its mesh is hf_mesh, for a world ray:
+   shrinks *tmax and records the hit as trace_blas; nothing for an instance without a BLAS.
+   `work`, `inst_work`: the counters of a TRACE_COUNT build (unused otherwise). */
+TRACE_INLINE bool trace_instance(SCENE_PARAMS, int id, int hf_mesh, float3 org, float3 dir,
+                                 float tmin, float* tmax, bool any, Hit* hit, uint* work,
+                                 uint* inst_work) {
     __global const Instance* ins = instances + id;
     int broot = ins->blas_root;
     if (broot < 0) return false;
     float3 oo, od;
     TraceRay lr = trace_object_ray_od(ins, org, dir, &oo, &od);
     TRACE_TICK(work, TRACE_CNT_ENTRIES, 1);
-    if (heightfield_only || ins->mesh == hf_mesh)
-        return trace_heightfield(hf_info, hf_vertices, hf_blocks, &lr, oo, od, tmin, tmax, hit,
-                                 id, any, trace_stats);
 #if TRACE_COUNT
     uint before = work[TRACE_CNT_BLAS];
 #endif
-    bool got = trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, tmax, hit, id, any,
-                          trace_stats, work);
+    bool got = ins->mesh == hf_mesh
+        ? trace_heightfield(hf_info, hf_vertices, hf_blocks, &lr, oo, od, tmin, tmax, hit, id, any,
+                            trace_stats)
+        : trace_blas(blas_nodes, blas_tris, broot, &lr, tmin, tmax, hit, id, any, trace_stats,
+                     work);
 #if TRACE_COUNT
     inst_work[min(id, TRACE_COUNT_INST - 1)] += work[TRACE_CNT_BLAS] - before;
 #endif
     return got;
-}
-
-TRACE_INLINE bool trace_instance(SCENE_PARAMS, int id, int hf_mesh, float3 org, float3 dir,
-                                 float tmin, float* tmax, bool any, Hit* hit, uint* work,
-                                 uint* inst_work) {
-    return trace_instance_walk(SCENE_ARGS, id, hf_mesh, org, dir, tmin, tmax, any, hit, work,
-                               inst_work, false);
-}
-
-/* A traversal's start: *hit a miss; false when the ray can hit nothing (no scene, an empty
-   range, no direction). */
-TRACE_INLINE bool trace_begin(__global const BvhInfo* restrict tlas_info, float3 dir, float tmin,
-                              float tmax, Hit* hit) {
-    hit->t = INFINITY;
-    hit->u = 0.0f;
-    hit->v = 0.0f;
-    hit->prim = -1;
-    hit->inst = -1;
-    return tlas_info->root >= 0 && tmax > tmin && !(dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f);
 }
 
 /* The whole scene: the TLAS over instances, each instance's BLAS in its object space; only
@@ -537,8 +517,14 @@ TRACE_INLINE bool trace_begin(__global const BvhInfo* restrict tlas_info, float3
 TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
                                    bool any, uint mask, int only, Hit* hit, uint* work,
                                    uint* inst_work) {
-    if (!trace_begin(tlas_info, dir, tmin, tmax, hit)) return false;
-    const int root = tlas_info->root;
+    hit->t = INFINITY;
+    hit->u = 0.0f;
+    hit->v = 0.0f;
+    hit->prim = -1;
+    hit->inst = -1;
+    int root = tlas_info->root;
+    if (root < 0 || !(tmax > tmin) || (dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f))
+        return false;
     const int hf_mesh = hf_info->mesh;
     float tbest = tmax;
     if (only >= 0)
@@ -578,10 +564,15 @@ TRACE_INLINE bool trace_scene_walk(SCENE_PARAMS, float3 org, float3 dir, float t
     return found;
 }
 
+/* trace_scene_walk, its work added to kind's counters in a TRACE_COUNT build. */
+TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
+                              bool any, uint mask, int only, Hit* hit, int kind) {
 #if TRACE_COUNT
-/* A traversal's work added to kind's counters (TRACE_COUNT builds). */
-TRACE_INLINE void trace_count_work(__global int* restrict trace_stats, uint* work,
-                                   uint* inst_work, bool found, int kind) {
+    uint work[TRACE_COUNT_FIELDS], inst_work[TRACE_COUNT_INST];
+    for (int f = 0; f < TRACE_COUNT_FIELDS; ++f) work[f] = 0;
+    for (int f = 0; f < TRACE_COUNT_INST; ++f) inst_work[f] = 0;
+    bool found =
+        trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, only, hit, work, inst_work);
     work[TRACE_CNT_RAYS] = (kind & TRACE_CONTINUE) ? 0u : 1u;
     work[TRACE_CNT_TRAVERSALS] = 1u;
     work[TRACE_CNT_HITS] = found ? 1u : 0u;
@@ -592,39 +583,10 @@ TRACE_INLINE void trace_count_work(__global int* restrict trace_stats, uint* wor
     __global uint* ci = (__global uint*)trace_stats + TRACE_STAT_INST + k * TRACE_COUNT_INST;
     for (int f = 0; f < TRACE_COUNT_INST; ++f)
         if (inst_work[f]) atomic_add(ci + f, inst_work[f]);
-}
-#define TRACE_WORK_BEGIN                                                                    \
-    uint work[TRACE_COUNT_FIELDS], inst_work[TRACE_COUNT_INST];                             \
-    for (int f = 0; f < TRACE_COUNT_FIELDS; ++f) work[f] = 0;                               \
-    for (int f = 0; f < TRACE_COUNT_INST; ++f) inst_work[f] = 0
-#define TRACE_WORK_END(found, kind) trace_count_work(trace_stats, work, inst_work, found, kind)
-#else
-#define TRACE_WORK_BEGIN uint* work = 0; uint* inst_work = 0
-#define TRACE_WORK_END(found, kind) ((void)0)
-#endif
-
-/* trace_scene_walk, its work added to kind's counters in a TRACE_COUNT build. */
-TRACE_INLINE bool trace_scene(SCENE_PARAMS, float3 org, float3 dir, float tmin, float tmax,
-                              bool any, uint mask, int only, Hit* hit, int kind) {
-    TRACE_WORK_BEGIN;
-    bool found =
-        trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, only, hit, work, inst_work);
-    TRACE_WORK_END(found, kind);
     return found;
-}
-
-/* trace_scene's closest hit for `only` an instance of the height field's mesh (the caller
-   knows it is): the same hit from its walk alone, with no TLAS or BLAS walk compiled in (the
-   shadow kernels' SHADOW_MAPPED flavour: render_shadow.h). */
-TRACE_INLINE Hit trace_closest_heightfield(SCENE_PARAMS, float3 org, float3 dir, float tmin,
-                                           float tmax, int only, int kind) {
-    Hit h;
-    TRACE_WORK_BEGIN;
-    const bool found = trace_begin(tlas_info, dir, tmin, tmax, &h)
-        && trace_instance_walk(SCENE_ARGS, only, hf_info->mesh, org, dir, tmin, &tmax, false, &h,
-                               work, inst_work, true);
-    TRACE_WORK_END(found, kind);
-    return h;
+#else
+    return trace_scene_walk(SCENE_ARGS, org, dir, tmin, tmax, any, mask, only, hit, 0, 0);
+#endif
 }
 
 /* Closest hit in [tmin, tmax) among the instances whose mask shares a bit with `mask`: prim

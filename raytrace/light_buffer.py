@@ -13,12 +13,7 @@ Per build (:meth:`LightBuffer.enqueue`, when the transform rows were written sin
 ``light_buffer_clear`` over every map's cells, then per map ``light_buffer_raster`` (a work-item
 per triangle, moved by its instance's live transform row: a boat that a device stage moves is
 followed with no host copy) and ``light_buffer_raster_big`` (the triangles over more than 32
-cells: a work-group each, or the whole launch for those over 4096), then the lists of the cells
-of more than ``LB_SLOTS`` triangles (``light_buffer_overflow_ranges`` and ``_fill``, in the map's
-overflow region of ``over_cap`` entries), and a non-blocking read of the map's counters: once it
-has arrived, :attr:`LightBuffer.complete` says whether the last build's maps answer every shadow
-ray (no list without room, nothing reaching off a map), so that the renderer may take the shadow
-kernels that walk no BVH (``SHADOW_MAPPED``).
+cells: a work-group each, or the whole launch for those over 4096).
 """
 
 from __future__ import annotations
@@ -26,18 +21,15 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from kernels.pinned import PinnedRing
 from kernels.runtime import Runtime
 from raytrace.render_types import MAX_LIGHTS, LightKind
 
 _F4 = (np.float32, 4)
-#: Mirror of ``LightBuffer`` (kernels/light_buffer.h), 96 bytes.
+#: Mirror of ``LightBuffer`` (kernels/light_buffer.h), 80 bytes.
 LIGHT_BUFFER = np.dtype([("u", _F4), ("v", _F4), ("toward", _F4), ("n_u", np.int32),
                          ("n_v", np.int32), ("cell_base", np.int32), ("outside_cell", np.int32),
                          ("big_cell", np.int32), ("margin", np.float32),
-                         ("depth_slack", np.float32), ("over_cell", np.int32),
-                         ("over_base", np.int32), ("over_cap", np.int32), ("box_base", np.int32),
-                         ("pad", np.int32)])
+                         ("depth_slack", np.float32), ("pad", np.float32)])
 LB_SLOTS = 16           #: kernels/light_buffer.h
 #: Most cells along a map's side.
 MAX_CELLS = 8192
@@ -48,14 +40,6 @@ MAX_TRIANGLES = 1 << 20
 DOMAIN_PAD = 0.1
 #: Most work-items light_buffer_raster starts (they stride over the triangles).
 _MAX_ITEMS = 1 << 20
-#: A map's overflow region (the triangles past a cell's slots): OVER_PER_TRIANGLE entries per
-#: listed triangle, at least OVER_MIN. The baseline scene's map of 1024 cells needs 25,242 of
-#: its 148,700 (BENCHMARKS.md, twelfth session); a map that needs more answers "unknown" in its
-#: full cells, and their rays walk the BVH.
-OVER_PER_TRIANGLE = 2
-OVER_MIN = 1 << 16
-#: Counter cells after the maps' cells, per map: outside_cell, big_cell, over_cell.
-_COUNTERS = 3
 
 
 class LightBuffer:
@@ -66,17 +50,14 @@ class LightBuffer:
         self.rt, self.cells, self.stage = rt, int(cells), stage
         self.maps = np.zeros(MAX_LIGHTS, LIGHT_BUFFER)
         self.n_tris = 0
-        self.n_cells = 0               #: cells of every map, then three counters per map
+        self.n_cells = 0               #: cells of every map, then two counters per map
         self.n_map_cells = 0           #: cells of every map
         self.reason = "not planned"    #: why no light has a map ("" when one has)
         self._key = None
         self._generation = 0           # plans made (each replaces the buffers)
         self._built = None             # (rows_version, generation) of the last build
         self.builds = 0                #: builds enqueued
-        self.over_cap = 0              #: each map's overflow region (entries)
-        self._counters = None          # the last build's counters read: (builds, PinnedRing)
-        self._complete = False         # what the last counters that arrived said
-        self._alloc(np.zeros((1, 4), np.float32), 1, 0, 0)
+        self._alloc(np.zeros((1, 4), np.float32), 1)
         self._kernels = None           # built with the first map (none: no program to build)
         # the big triangles' launch: a few work-groups per compute unit share each one's cells
         self._big_items = 4 * 256 * rt.device.max_compute_units
@@ -87,23 +68,16 @@ class LightBuffer:
                 self.rt.kernel_launcher("light_buffer.cl", f"light_buffer_{name}",
                                         stage=f"{self.stage}.{stage}")
                 for name, stage in (("clear", "clear"), ("raster", "raster"),
-                                    ("raster_big", "big"), ("overflow_ranges", "lists"),
-                                    ("overflow_fill", "lists")))
+                                    ("raster_big", "big")))
         return self._kernels
 
-    def _alloc(self, tris: np.ndarray, n_cells: int, n_over: int, n_boxes: int) -> None:
+    def _alloc(self, tris: np.ndarray, n_cells: int) -> None:
         rt = self.rt
         self.maps_buf = rt.to_device(self.maps)
         self.tris_buf = rt.to_device(tris)
         self.cells_buf = rt.buffer(8 * max(n_cells, 1))
         self.slots_buf = rt.buffer(4 * LB_SLOTS * max(n_cells, 1))
         self.big_buf = rt.buffer(4 * max(len(tris) // 3, 1))   # light_buffer_raster_big's list
-        self.over_buf = rt.buffer(8 * max(n_cells, 1))         # a full cell's list: first, filled
-        self.pairs_buf = rt.buffer(8 * max(n_over, 1))         # (cell, triangle) past the slots
-        self.extra_buf = rt.buffer(4 * max(n_over, 1))         # the full cells' lists
-        self.boxes_buf = rt.buffer(16 * max(n_boxes, 1))      # each map's footprint boxes
-        self._counters = None
-        self._complete = False
 
     @property
     def active(self) -> bool:
@@ -113,8 +87,7 @@ class LightBuffer:
     def bindings(self) -> dict:
         """``LIGHT_BUFFER_PARAMS`` (kernels/light_buffer.h) by name."""
         return {"lb_maps": self.maps_buf, "lb_cells": self.cells_buf,
-                "lb_slots": self.slots_buf, "lb_tris": self.tris_buf, "lb_over": self.over_buf,
-                "lb_extra": self.extra_buf, "lb_boxes": self.boxes_buf}
+                "lb_slots": self.slots_buf, "lb_tris": self.tris_buf}
 
     # -- planning --------------------------------------------------------------------------
     def plan(self, render_scene, any_hit_mask: int) -> bool:
@@ -143,19 +116,13 @@ class LightBuffer:
             for i in directional:
                 n_cells = self._plan_map(i, -lights[i]["direction"][:3], world, n_cells)
             self.n_map_cells = n_cells
-            self.over_cap = max(OVER_MIN, OVER_PER_TRIANGLE * (len(tris) // 3))
             for k, i in enumerate(directional):   # their counters after every map's cells
-                for f, name in enumerate(("outside_cell", "big_cell", "over_cell")):
-                    self.maps[i][name] = n_cells + _COUNTERS * k + f
-                self.maps[i]["over_base"] = k * self.over_cap
-                self.maps[i]["over_cap"] = self.over_cap
-                self.maps[i]["box_base"] = k * (len(tris) // 3)
-            n_cells += _COUNTERS * len(directional)
+                self.maps[i]["outside_cell"] = n_cells + 2 * k
+                self.maps[i]["big_cell"] = n_cells + 2 * k + 1
+            n_cells += 2 * len(directional)
         self.n_tris = 0 if self.reason else len(tris) // 3
         self.n_cells = n_cells
-        n_over = self.over_cap * len(directional) if self.n_tris else 0
-        self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells, n_over,
-                    self.n_tris * len(directional))
+        self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells)
         return True
 
     def _triangles(self, render_scene, masks, mask: int) -> tuple[np.ndarray, str]:
@@ -236,86 +203,40 @@ class LightBuffer:
             return False
         self._built = key
         self.builds += 1
-        clear, raster, raster_big, ranges, fill = self._launchers()
+        clear, raster, raster_big = self._launchers()
         clear.bind(lb_cells=self.cells_buf, n_cells=self.n_cells, n_map_cells=self.n_map_cells)
         clear.launch(self.n_cells, 256)
         if self.n_tris == 0:
             return True
         bufs = {"lb_maps": self.maps_buf, "lb_tris": self.tris_buf, "xforms": transform_buffer,
-                "lb_cells": self.cells_buf, "lb_slots": self.slots_buf, "lb_big": self.big_buf,
-                "lb_pairs": self.pairs_buf}
-        raster.bind(**bufs, n_tris=self.n_tris, lb_boxes=self.boxes_buf)
+                "lb_cells": self.cells_buf, "lb_slots": self.slots_buf, "lb_big": self.big_buf}
+        raster.bind(**bufs, n_tris=self.n_tris)
         raster_big.bind(**bufs, n_tris=self.n_tris)
-        ranges.bind(lb_maps=self.maps_buf, lb_cells=self.cells_buf, lb_over=self.over_buf)
-        fill.bind(lb_maps=self.maps_buf, lb_cells=self.cells_buf, lb_pairs=self.pairs_buf,
-                  lb_over=self.over_buf, lb_extra=self.extra_buf)
         items = min(self.n_tris, _MAX_ITEMS)
         for light in np.flatnonzero(self.maps["n_u"] > 0):
-            m = self.maps[light]
-            for k, size, group in ((raster, -(-items // 64) * 64, 64),
-                                   (raster_big, self._big_items, 256),
-                                   (ranges, min(-(-int(m["n_u"] * m["n_v"]) // 256) * 256,
-                                                _MAX_ITEMS), 256),
-                                   (fill, min(-(-self.over_cap // 256) * 256, _MAX_ITEMS), 256)):
-                k.bind(light=int(light))
-                k.launch(size, group)
-        self._read_counters()
+            raster.bind(light=int(light))
+            raster.launch(-(-items // 64) * 64, 64)
+            raster_big.bind(light=int(light))
+            raster_big.launch(self._big_items, 256)
         return True
-
-    # -- whether the maps answer every ray -----------------------------------------------
-    def _read_counters(self) -> None:
-        """Queue the read of every map's counters after this build (no wait)."""
-        n = _COUNTERS * 2 * int(self.maps["n_u"].astype(bool).sum())
-        ring = self._counters[1] if self._counters is not None \
-            else PinnedRing(self.rt, 4 * n, np.int32, (n,), slots=1)   # made again per plan
-        handle = ring.enqueue_read(self.rt.queue, self.cells_buf, 8 * self.n_map_cells)
-        self.rt.keep(handle.event)
-        self._counters = (handle, ring)
-
-    @property
-    def complete(self) -> bool:
-        """Whether the last build's maps answer every shadow ray toward their lights (each full
-        cell's list found room, no triangle reached off a map), by its counters once their read
-        has arrived (never waits; False until then, and with no map)."""
-        if self._counters is None or not self.active:
-            return False
-        handle = self._counters[0]
-        if handle is not None and handle.ready():
-            c = handle.array.reshape(-1, _COUNTERS, 2)   # per map: outside, big, over
-            self._complete = bool((c[:, 0, 0] == 0).all() and (c[:, 2, 0] <= self.over_cap).all())
-            self._counters = (None, self._counters[1])
-        return self._complete and self._counters[0] is None
 
     def read(self, light: int) -> dict:
         """Light ``light``'s map as host arrays (synchronises; tests and studies): ``count``
         and ``depth`` (n_v, n_u), ``slots`` (n_v, n_u, LB_SLOTS), ``outside`` (triangles that
-        reached off the map), ``big`` (those left to light_buffer_raster_big), ``past_slots``
-        (triangles past a cell's slots) and ``lists`` ({(j, i): every triangle of a cell of
-        more than LB_SLOTS}, when they found room)."""
+        reached off the map) and ``big`` (those left to light_buffer_raster_big)."""
         m = self.maps[light]
         if m["n_u"] == 0:
             raise ValueError(f"light {light} has no map ({self.reason or 'not directional'})")
         n = int(m["n_u"] * m["n_v"])
         base = int(m["cell_base"])
         cells = self.rt.to_host(self.cells_buf, np.int32, 2 * n, 2 * base).reshape(-1, 2)
-        counters = self.rt.to_host(self.cells_buf, np.int32, 2 * _COUNTERS,
-                                   2 * int(m["outside_cell"]))
+        counters = self.rt.to_host(self.cells_buf, np.int32, 4, 2 * int(m["outside_cell"]))
         slots = self.rt.to_host(self.slots_buf, np.int32, LB_SLOTS * n, LB_SLOTS * base)
         shape = (int(m["n_v"]), int(m["n_u"]))
-        count = cells[:n, 0].reshape(shape)
-        slots = slots.reshape(*shape, LB_SLOTS)
-        lists = {}
-        if 0 < counters[4] <= self.over_cap:
-            over = self.rt.to_host(self.over_buf, np.int32, 2 * n, 2 * base).reshape(shape + (2,))
-            extra = self.rt.to_host(self.extra_buf, np.int32, self.over_cap, int(m["over_base"]))
-            for j, i in zip(*np.nonzero(count > LB_SLOTS), strict=True):
-                first = over[j, i, 0] - int(m["over_base"])
-                lists[(int(j), int(i))] = np.concatenate(
-                    [slots[j, i], extra[first:first + count[j, i] - LB_SLOTS]])
-        return {"count": count, "depth": ordered_to_float(cells[:n, 1]).reshape(shape),
-                "slots": slots, "outside": int(counters[0]),
-                "big": int(counters[2] + counters[3]), "past_slots": int(counters[4]),
-                "lists": lists}
+        return {"count": cells[:n, 0].reshape(shape),
+                "depth": ordered_to_float(cells[:n, 1]).reshape(shape),
+                "slots": slots.reshape(*shape, LB_SLOTS), "outside": int(counters[0]),
+                "big": int(counters[2] + counters[3])}
 
 
 def ordered_to_float(i: np.ndarray) -> np.ndarray:

@@ -154,11 +154,6 @@ class RenderSettings:
                                   #: map of the opaque triangles' shadows (raytrace.light_buffer:
                                   #: the shadow rays' any-hit query without a BVH walk, the
                                   #: same image); 0: none
-    mapped_shadows: bool = True   #: where those maps answer every shadow ray and the crossings
-                                  #: are all of the height field (Renderer.mapped_possible,
-                                  #: LightBuffer.complete), the shadow launches take the kernels
-                                  #: with no BVH walk compiled in (SHADOW_MAPPED), each level's
-                                  #: alone (no overlap_levels for them); the same image
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -339,7 +334,6 @@ class Renderer:
         self.caustic_params = np.zeros(1, CAUSTIC_PARAMS)[0]
         # the directional lights' maps of what blocks them (raytrace.light_buffer)
         self.light_buffer = LightBuffer(rt, s.light_buffer)
-        self.mapped_shadows_used = False   #: the last frame's shadow launches were SHADOW_MAPPED
         # this renderer's own kernels: raygen, and per depth level trace/shade/scan/gather
         self.k_raygen = rt.kernel_launcher("render_raygen.cl", "render_raygen",
                                            stage="render.raygen")
@@ -470,28 +464,6 @@ class Renderer:
         way."""
         self.settings = dataclasses.replace(self.settings, one_crossing=bool(on))
 
-    def set_mapped_shadows(self, on: bool) -> None:
-        """Let the shadow launches take the kernels with no BVH walk where the light buffer
-        answers every ray (``mapped_shadows``) from the next frame on; an A/B switch (bench
-        frame --mapped-shadows). The same image either way."""
-        self.settings = dataclasses.replace(self.settings, mapped_shadows=bool(on))
-        self._bound_sig = None  # rebind: the mapped kernels
-
-    def mapped_possible(self) -> bool:
-        """Whether every shadow ray of this scene could be answered by the light buffer's maps
-        with its crossings walking the height field alone: ``mapped_shadows`` on, every light
-        with a map (no spot light), and where the scene has a dielectric, one instance holding
-        them all (``crossing_instance``) that is the height field. Whether the built maps do
-        is :attr:`LightBuffer.complete`."""
-        s, sc = self.settings, self.scene
-        lb = self.light_buffer
-        if not (s.mapped_shadows and lb.active) or (lb.maps["n_u"][:len(sc.lights)] == 0).any():
-            return False
-        if not sc.has_dielectric:
-            return True
-        ci, hf = (sc.crossing_instance if s.direct_crossings else -1), sc.scene.heightfield.mesh
-        return ci >= 0 and hf is not None and sc.scene.instance_mesh(ci) == hf
-
     def set_stage_per_depth(self, on: bool = True) -> None:
         """Time each depth level's trace, shade, shadow, scan and gather under its own stage
         (``render.shadow.d3``), e.g. to see the tail levels of few rays (bench frame
@@ -541,14 +513,6 @@ class Renderer:
         if s.cost_bins:   # the shadow launches with their rays grouped by cost
             for d, ks in enumerate(self._k):
                 self._add_flavour(ks, d, "_binned", self._SHADOW)
-        if self.mapped_possible():   # the shadow kernels with no BVH walk (SHADOW_MAPPED)
-            for ks in self._k:
-                for f in ("", "_binned") if s.cost_bins else ("",):
-                    if "shadow" + f + "_mapped" not in ks:
-                        ks["shadow" + f + "_mapped"] = rt.kernel_launcher(
-                            "render_shade.cl", "render_shadow" + f, stage=ks["shadow"].stage,
-                            defines={"SHADOW_MAPPED": 1})
-                        self._bound_sig = None
         if s.coop_from is not None:   # the cooperative flavours of the levels from coop_from
             # on a CPU the serial walk per work-item (kernels/traverse_coop.h TRACE_COOP_SERIAL:
             # PoCL compiles the walk inside these kernels for minutes; the hits are the same)
@@ -610,7 +574,7 @@ class Renderer:
                                   hits=hits, **out)
             light = {"lights": self.scene.light_buf, "caustic_map": self.caustic_map,
                      "cprm": self.caustic_params, **lbuf}
-            for f in ("", "_binned", "_mapped", "_binned_mapped"):   # the plain's arguments
+            for f in ("", "_binned"):   # the binned flavour: the plain kernel's arguments
                 if "shadow" + f in k:
                     k["shadow" + f].bind(**scene, **shading, **light, **wave, hits=hits,
                                          radiance=radiance)
@@ -727,9 +691,6 @@ class Renderer:
         self._bind(deepest)
         self._bind_caustics()
         self.light_buffer.enqueue(self.scene.transform_buffer, self.scene.scene.rows_version)
-        # the last build's counters have arrived and say its maps answer every ray
-        mapped = self.mapped_possible() and self.light_buffer.complete
-        self.mapped_shadows_used = mapped
         hint = self._count_hint() if len(self._plan) == 1 and s.size_hints else None
         sizes = tuple(self._launch_sizes(depths, hint) for *_, depths in self._plan)
         # levels of few rays by the last counts: their trace and shadow rays one per work-group,
@@ -744,12 +705,12 @@ class Renderer:
                                                  or hint[d] >= BIN_MIN_RAYS)
                      for d in range(deepest + 1))
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
-               s.overlap_levels, s.overlap_from, few, bins, mapped, self._bind_version)
+               s.overlap_levels, s.overlap_from, few, bins, self._bind_version)
         ops = self._plans.get(key)
         if ops is None:
             if len(self._plans) >= 16:
                 self._plans.clear()
-            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few, bins, mapped)
+            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few, bins)
         self._run(ops, rebind=len(self._plan) > 1 or ops is not self._last_ops)
         self._last_ops = ops
         if read_stats:
@@ -768,14 +729,12 @@ class Renderer:
     _LAUNCH, _BIND, _FLUSH = 0, 1, 2
 
     def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool, few: tuple,
-                   bins: tuple, mapped: bool = False) -> list:
+                   bins: tuple) -> list:
         """The frame's launches in order, sizes and arguments decided: what the per-frame loop
         did, made once per (sizes, depth, lights, stage names, levels of few rays, binned
-        levels, mapped shadows, bindings). ``few[d]``: where level d's rays go one per
-        work-group, the power of two at or above its last ray count (its work-groups), else
-        None; ``bins[d]``: level d's shadow rays go through the binned kernels; ``mapped``:
-        every level's shadow rays through the kernels with no BVH walk (SHADOW_MAPPED), alone
-        (not with the next level's trace; never one per work-group)."""
+        levels, bindings). ``few[d]``: where level d's rays go one per work-group, the power of
+        two at or above its last ray count (its work-groups), else None; ``bins[d]``: level d's
+        shadow rays go through the binned kernels."""
         s, ks = self.settings, self._k
         ls, scan_ls = (s.local_size,), (SCAN_WG,)
         ops = []
@@ -792,7 +751,7 @@ class Renderer:
         trace = "trace_shade" if s.fuse_trace_shade else "trace"
 
         def overlapped(d: int) -> bool:   # level d's shadow rays go with level d + 1's trace
-            return not mapped and s.overlap_levels and s.overlap_from <= d < deepest
+            return s.overlap_levels and s.overlap_from <= d < deepest
 
         def coop(d: int) -> bool:   # level d's rays go one per work-group (the hits are the
             return few[d] is not None   # same either way)
@@ -803,12 +762,7 @@ class Renderer:
             return -(-size // COOP_WIDTH) * COOP_WIDTH   # else a work-item per ray
 
         def per_ray(k: dict, name: str, d: int, size: tuple) -> None:  # any flavour
-            if mapped and name == "shadow":
-                binned = bins[d] and "shadow_binned_mapped" in k
-                launch(k["shadow_binned_mapped" if binned else "shadow_mapped"],
-                       (-(-size[0] // BIN_WG) * BIN_WG,) if binned else size,
-                       (BIN_WG,) if binned else ls)
-            elif coop(d):
+            if coop(d):
                 launch(k[name + "_coop"], (coop_size(d, size[0]),), (COOP_WIDTH,))
             elif bins[d] and name + "_binned" in k:
                 launch(k[name + "_binned"], (-(-size[0] // BIN_WG) * BIN_WG,), (BIN_WG,))
@@ -897,8 +851,7 @@ class Renderer:
         for k in self._k:
             for name in ("shadow", "shadow_trace", "shadow_trace_shade", "shadow_coop",
                          "shadow_trace_coop", "shadow_trace_shade_coop", "shadow_binned",
-                         "shadow_trace_binned", "shadow_trace_shade_binned", "shadow_mapped",
-                         "shadow_binned_mapped"):
+                         "shadow_trace_binned", "shadow_trace_shade_binned"):
                 if name in k:
                     k[name].bind(caustic_map=cmap, cprm=self.caustic_params)
         self._caustic_bound = (cmap, cprm, self._bind_version)

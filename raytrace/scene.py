@@ -48,11 +48,11 @@ TRACE_STAT_COOP_REDO = 1
 #: TRACE_COUNT builds: height-field walks culled whole and spans skipped by the slopes.
 TRACE_STAT_HF_CULLED = 2
 TRACE_STAT_HF_SKIPPED = 3
-#: TRACE_COUNT builds: the light buffer's answers by kind, then the triangles it tested and the
-#: queries answered from a cell's list past its slots (kernels/light_buffer.h).
+#: TRACE_COUNT builds: the light buffer's answers by kind, then the triangles it tested
+#: (kernels/light_buffer.h).
 TRACE_STAT_LB = 4
 LIGHT_BUFFER_COUNT_FIELDS = ("empty", "nearer", "tested_clear", "blocked", "full", "off_map",
-                             "triangles", "long_lists")
+                             "triangles")
 #: The traversal work counters of TRACE_COUNT builds (kernels/scene.h): ray kinds and fields.
 TRACE_KINDS = ("query", "primary", "secondary", "shadow", "photon", "crossing")
 TRACE_COUNT_FIELDS = ("rays", "traversals", "tlas_nodes", "blas_entries", "blas_nodes",
@@ -262,9 +262,6 @@ class Scene:
 
     def instance_mask(self, instance_id: int) -> int:
         return self._inst_masks[int(instance_id)]
-
-    def instance_mesh(self, instance_id: int) -> int:
-        return self._inst_mesh[int(instance_id)]
 
     def transform_row(self, instance_id: int) -> int:
         """The row of :attr:`transform_buffer` holding instance ``instance_id``'s
