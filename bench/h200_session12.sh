@@ -20,6 +20,9 @@
 #   footprint's box (as the tree has it) against every cell's so (boxall) and the walking
 #   kernels (--mapped-shadows off); per depth once, whole frames twice in turns, 3840x2160 and
 #   the pool whole.
+# PART noinline: the shadow stage's walks as functions the compiler does not inline (niany: the
+#   any-hit walk the light buffer falls back to; niboth: and the crossings' closest hit), per
+#   depth twice in turns, whole once, and their registers.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -107,6 +110,27 @@ boxes)
     for m in on off; do
         lb bench frame $k $static --mapped-shadows $m --out "$out/static4k_$m" | tail -1
         lb bench frame $f --mapped-shadows $m --out "$out/pool_$m" | tail -1
+    done
+    ;;
+noinline)
+    # the walks of the shadow stage as functions of their own: the any-hit walk of the rays the
+    # light buffer leaves unknown (niany: bench/patches/shadow_walk_noinline.patch) and the
+    # crossings' closest hit too (niboth: shadow_walks_noinline.patch), against the tree
+    for v in niany niboth; do variant_tree /tmp/$v; done
+    (cd /tmp/niany && patch -p1 -s < "$OLDPWD/bench/patches/shadow_walk_noinline.patch")
+    (cd /tmp/niboth && patch -p1 -s < "$OLDPWD/bench/patches/shadow_walks_noinline.patch")
+    g="$f $static --per-depth --no-overlap"
+    for rep in 1 2; do
+        lb bench frame $g --out "$out/static_pd_tree_$rep" | tail -1
+        for v in niany niboth; do
+            in_tree /tmp/$v bench frame $g --out "$out/static_pd_${v}_$rep" 2>&1 | tail -1
+        done
+    done
+    lb bench frame $f $static --out "$out/static_tree" | tail -1
+    for v in niany niboth; do
+        in_tree /tmp/$v bench frame $f $static --out "$out/static_$v" | tail -1
+        (cd /tmp/$v && PYTHONPATH=/tmp/site:/tmp/$v timeout 100 python3 bench/kernel_resources.py \
+            --scene bench/scenes/pool_static_boat.toml --out "$out/resources_$v.json" | tail -1)
     done
     ;;
 *)
