@@ -23,6 +23,8 @@
 # PART noinline: the shadow stage's walks as functions the compiler does not inline (niany: the
 #   any-hit walk the light buffer falls back to; niboth: and the crossings' closest hit), per
 #   depth twice in turns, whole once, and their registers.
+# PART check: the tree (the walks out of line): its device tests of the shadow kernels' frames,
+#   then the baseline scene per depth and whole once.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -132,6 +134,14 @@ noinline)
         (cd /tmp/$v && PYTHONPATH=/tmp/site:/tmp/$v timeout 100 python3 bench/kernel_resources.py \
             --scene bench/scenes/pool_static_boat.toml --out "$out/resources_$v.json" | tail -1)
     done
+    ;;
+check)
+    # the tree's shadow walks out of line: their device tests (every shadow kernel's frames),
+    # then the baseline scene per depth and whole once
+    timeout 170 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_render_overlap.py \
+        tests/raytrace/test_light_buffer.py -k "frames or overlap" 2>&1 | tail -1
+    lb bench frame $f $static --per-depth --no-overlap --out "$out/static_pd_tree" | tail -1
+    lb bench frame $f $static --out "$out/static_tree" | tail -1
     ;;
 *)
     echo "unknown PART $part" >&2

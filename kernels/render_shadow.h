@@ -15,6 +15,31 @@ inline float smooth01(float e0, float e1, float x)
     return t * t * (3.0f - 2.0f * t);
 }
 
+/* The shadow stage's two walks, each a function of its own that the compiler keeps out of line:
+ * the any-hit walk of a ray the light buffer leaves unknown and a crossing's closest hit.
+ * Inlined, their code and traversal stacks sat in every shadow kernel beside its shading; out
+ * of line, the baseline scene's shadow rays took 0.528 against 0.558 ms on the H200, with the
+ * same registers (BENCHMARKS.md, twelfth session; bench/patches/shadow_walks_noinline.patch).
+ * On a CPU (TRACE_CPU: PoCL) they stay inline, as every traversal helper there (traverse.h):
+ * out of line, PoCL's level-0 shadow launch took 3% longer. */
+#if TRACE_CPU
+#define SHADOW_WALK TRACE_INLINE
+#else
+#define SHADOW_WALK __attribute__((noinline))
+#endif
+
+SHADOW_WALK bool shadow_any_walk(TRACE_PARAMS, float3 org, float3 dir, float tmax, uint mask)
+{
+    return trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, mask, TRACE_KIND_SHADOW);
+}
+
+SHADOW_WALK Hit shadow_crossing_walk(TRACE_PARAMS, float3 org, float3 dir, float tmax, int ci,
+                                     int kind)
+{
+    return trace_closest_only(TRACE_ARGS, org, dir, 0.0f, tmax, RENDER_MASK_TRANSMISSIVE, ci,
+                              kind);
+}
+
 /* Fraction of light `light` reaching org along dir within tmax. Opaque scenes: one any-hit
  * query, answered from the light's map where it has one (light_buffer.h: the same answer).
  * With dielectrics (transmissive_shadows), the ray goes straight through up to
@@ -40,7 +65,7 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFE
                                             trace_stats);
     if (mapped == LB_BLOCKED
         || (mapped == LB_UNKNOWN
-            && trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW)))
+            && shadow_any_walk(TRACE_ARGS, org, dir, tmax, opaque)))
         return (float3)(0.0f);
     if (!prm->transmissive_shadows) return (float3)(1.0f);
     /* a ray that climbs faster than the water's slopes (hf_climbs) crosses it at most once,
@@ -57,8 +82,8 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFE
     for (int k = 0; k < RENDER_MAX_SHADOW_CROSSINGS; k++) {
         Hit h = {INFINITY, 0.0f, 0.0f, -1, -1};
         if (!(climbs && medium < 0 && (k || over)))
-            h = trace_closest_only(TRACE_ARGS, org, dir, 0.0f, tmax, RENDER_MASK_TRANSMISSIVE, ci,
-                                   TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
+            h = shadow_crossing_walk(TRACE_ARGS, org, dir, tmax, ci,
+                                     TRACE_KIND_CROSSING | (k ? TRACE_CONTINUE : 0));
         if (h.prim < 0) {
             if (medium >= 0) T *= beer(g_mat[medium].absorption.xyz, tmax);
             return T;
