@@ -54,3 +54,27 @@ def test_cpu_and_gpu_flavours_same_hits_as_reference(rt, leaf_size):
     anys = {f: trace(rt, scene, ro, rd, f, any_hit=True) for f in (0, 1)}
     assert np.array_equal(anys[0]["prim"] >= 0, ref["prim"] >= 0)
     assert np.array_equal(anys[0].view(np.uint8), anys[1].view(np.uint8))
+
+
+@pytest.mark.parametrize("bins_coop", [False, True])
+def test_gpu_flavour_frames_are_the_cpu_flavour_s_bytes(rt, bins_coop):
+    """TRACE_CPU=0 also keeps the shadow stage's walks out of line (render_shadow.h SHADOW_WALK),
+    as on a GPU: frames of issue 9's baseline scene, whose shadow rays fall back to the any-hit
+    walk in the light buffer's full cells and cross the water, are the CPU flavour's bytes
+    through the plain, binned and cooperative shadow kernels."""
+    from app.world import World
+    from kernels.runtime import Runtime
+
+    frames = {}
+    for flavour in (0, 1):
+        run = Runtime(rt.device, defines={"TRACE_CPU": flavour})
+        w = World("bench/scenes/pool_static_boat.toml", run, width=48, height=27, cells=32,
+                  light_buffer=64)
+        if bins_coop:
+            w.renderer.set_cost_bins(True)
+            w.renderer.set_coop(1)
+        frames[flavour] = [w.frame(1 / 30) for _ in range(2)]
+        assert w.renderer.light_buffer.read(0)["count"].max() > 16   # full cells: walks
+    for a, b in zip(frames[0], frames[1], strict=True):
+        assert np.array_equal(a, b)
+    assert frames[0][0][..., :3].std() > 5
