@@ -25,6 +25,12 @@
 #   depth twice in turns, whole once, and their registers.
 # PART check: the tree (the walks out of line): its device tests of the shadow kernels' frames,
 #   then the baseline scene per depth and whole once.
+# Each PART ran on the tree of the commit its results are named by (bench/results/
+# h200-2026-12-04-s12/PART_COMMIT.json): stack, frames and noinline edit render_shadow.h as
+# 1ea8caf has it (their seds and patches find nothing to change at 577b6b2 and later, whose
+# walks are out of line), and mapped and boxes need the mapped shadow kernels
+# (bench/patches/mapped_shadows.patch, applying to 1ea8caf). Run them from a checkout of that
+# commit (git worktree add DIR COMMIT); check runs on today's tree.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
