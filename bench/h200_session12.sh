@@ -44,7 +44,17 @@ variant_slots() {
         "s/^LB_SLOTS = 16 /LB_SLOTS = $n /" raytrace/light_buffer.py "$@"
 }
 nofallback='s/trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, opaque, TRACE_KIND_SHADOW)/false/'
-hf_only() { (cd "$1" && patch -p1 -s < "$OLDPWD/bench/patches/shadow_crossing_hf_only.patch"); }
+# with_patch DIR NAME: bench/patches/NAME.patch applied to the copy of the tree in DIR
+with_patch() { (cd "$1" && patch -p1 -s < "$OLDPWD/bench/patches/$2.patch"); }
+hf_only() { with_patch "$1" shadow_crossing_hf_only; }
+# mapped_4k_pool: the baseline scene at 3840x2160 and the pool, each with --mapped-shadows on
+# and off
+mapped_4k_pool() {
+    for m in on off; do
+        lb bench frame $k $static --mapped-shadows $m --out "$out/static4k_$m" | tail -1
+        lb bench frame $f --mapped-shadows $m --out "$out/pool_$m" | tail -1
+    done
+}
 case $part in
 stack)
     variant_slots /tmp/s64 64
@@ -93,10 +103,7 @@ mapped)
             lb bench frame $f $static --mapped-shadows $m --out "$out/static_${m}_$rep" | tail -1
         done
     done
-    for m in on off; do
-        lb bench frame $k $static --mapped-shadows $m --out "$out/static4k_$m" | tail -1
-        lb bench frame $f --mapped-shadows $m --out "$out/pool_$m" | tail -1
-    done
+    mapped_4k_pool
     ;;
 boxes)
     # the mapped kernels with each long list's triangles boxed first (the tree: cells of more
@@ -115,18 +122,15 @@ boxes)
         in_tree /tmp/boxall bench frame $f $static --out "$out/static_boxall_$rep" | tail -1
         lb bench frame $f $static --mapped-shadows off --out "$out/static_off_$rep" | tail -1
     done
-    for m in on off; do
-        lb bench frame $k $static --mapped-shadows $m --out "$out/static4k_$m" | tail -1
-        lb bench frame $f --mapped-shadows $m --out "$out/pool_$m" | tail -1
-    done
+    mapped_4k_pool
     ;;
 noinline)
     # the walks of the shadow stage as functions of their own: the any-hit walk of the rays the
     # light buffer leaves unknown (niany: bench/patches/shadow_walk_noinline.patch) and the
     # crossings' closest hit too (niboth: shadow_walks_noinline.patch), against the tree
     for v in niany niboth; do variant_tree /tmp/$v; done
-    (cd /tmp/niany && patch -p1 -s < "$OLDPWD/bench/patches/shadow_walk_noinline.patch")
-    (cd /tmp/niboth && patch -p1 -s < "$OLDPWD/bench/patches/shadow_walks_noinline.patch")
+    with_patch /tmp/niany shadow_walk_noinline
+    with_patch /tmp/niboth shadow_walks_noinline
     g="$f $static --per-depth --no-overlap"
     for rep in 1 2; do
         lb bench frame $g --out "$out/static_pd_tree_$rep" | tail -1

@@ -59,7 +59,7 @@ inline float3 shadow_transmittance(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFE
                                    __constant const RenderParams* prm, uint light, float3 org,
                                    float3 dir, float tmax, int medium)
 {
-    /* one any-hit call site for both cases (one traversal less inlined) */
+    /* one any-hit call site for both cases (one walk's code in the kernel) */
     const uint opaque = prm->transmissive_shadows ? RENDER_MASK_OPAQUE : ~0u;
     const int mapped = light_buffer_blocked(LIGHT_BUFFER_ARGS, instances, light, org, dir, tmax,
                                             trace_stats);
