@@ -8,6 +8,12 @@
 #   copies of the tree whose per-ray work-groups hold 32 or 128 work-items
 #   (RenderSettings.local_size, 64 as built); then the capped builds' registers and spills
 #   (bench/kernel_resources.py).
+# PART lean: bench/shadow_lean_probe.py on today's tree (the eighth session's probe: each level's
+#   shadow rays as the frame runs them, and as a list the shading writes, traced by a kernel that
+#   holds nothing else) at 1920x1080 on the baseline scene, and on copies of the tree whose
+#   shadow_transmittance leaves out the fallback walk (nofallback: full cells' rays unshadowed),
+#   the crossings (nocross) or both (notrace): the images wrong on purpose, to see what a
+#   list-traced stage would cost at best.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -33,6 +39,19 @@ regs)
     for n in 128 96; do
         LBWATER_CL_OPTIONS=-cl-nv-maxrregcount=$n timeout 100 python3 bench/kernel_resources.py \
             --scene bench/scenes/pool_static_boat.toml --out "$out/resources_cap$n.json" | tail -1
+    done
+    ;;
+lean)
+    nofallback='s/^    return trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, mask, TRACE_KIND_SHADOW);/    return false;/'
+    nocross='s/^    if (!prm->transmissive_shadows) return (float3)(1.0f);/    return (float3)(1.0f);/'
+    variant_tree /tmp/nofallback "$nofallback" kernels/render_shadow.h
+    variant_tree /tmp/nocross "$nocross" kernels/render_shadow.h
+    variant_tree /tmp/notrace "$nofallback" kernels/render_shadow.h "$nocross" kernels/render_shadow.h
+    a="--scene bench/scenes/pool_static_boat.toml --cells 1024 --size 1920 1080 --repeats 20"
+    timeout 150 python3 bench/shadow_lean_probe.py $a --json "$out/lean_tree.json" | tail -4
+    for v in nofallback nocross notrace; do
+        (cd /tmp/$v && PYTHONPATH=/tmp/site:/tmp/$v timeout 150 python3 bench/shadow_lean_probe.py \
+            $a --json "$out/lean_$v.json" | tail -4)
     done
     ;;
 *)
