@@ -14,6 +14,19 @@
 #   shadow_transmittance leaves out the fallback walk (nofallback: full cells' rays unshadowed),
 #   the crossings (nocross) or both (notrace): the images wrong on purpose, to see what a
 #   list-traced stage would cost at best.
+# PART fine: the light buffer's fine grids (a full cell's 8 x 8 fine cells) against the tree
+#   before them, in $OLD (a checkout of eadbbbb: git worktree add DIR eadbbbb; on the device, a
+#   copy of its app, kernels, lbm, raytrace, bench and tests beside today's scenes): the device
+#   tests of the light buffer, then the baseline scene per depth and whole at 1920x1080 in turns
+#   twice, at 3840x2160, and the pool (its boat floats: a build every frame) whole and per depth.
+# PART leanfine: bench/shadow_lean_probe.py (as PART lean) on the tree with fine grids against
+#   $OLD, twice in turns.
+# PART order: what the rays of full light-buffer cells cost a list-traced shadow stage, and
+#   whether starting them first hides it: bench/shadow_lean_probe.py with and without
+#   --full-first on the tree (fine grids), on $OLD (walks; its probe and light_buffer_full as
+#   the tree has them), and on copies of the tree with no fallback walk (nofallback, wrong
+#   images) or with the walk's code compiled in but never run (neverwalk: a condition the
+#   compiler cannot see through, prm->n_lights > 1000; wrong images).
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -53,6 +66,59 @@ lean)
         (cd /tmp/$v && PYTHONPATH=/tmp/site:/tmp/$v timeout 150 python3 bench/shadow_lean_probe.py \
             $a --json "$out/lean_$v.json" | tail -4)
     done
+    ;;
+fine)
+    old=${OLD:?OLD: a checkout of eadbbbb}
+    [ -d "$old/scenes" ] || cp -r scenes "$old"/
+    timeout 200 python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_light_buffer.py \
+        2>&1 | tail -1
+    g="$f $static --per-depth --no-overlap"
+    for rep in 1 2; do
+        lb bench frame $g --out "$out/static_pd_fine_$rep" | tail -1
+        in_tree "$old" bench frame $g --out "$out/static_pd_old_$rep" 2>&1 | tail -1
+        lb bench frame $f $static --out "$out/static_fine_$rep" | tail -1
+        in_tree "$old" bench frame $f $static --out "$out/static_old_$rep" | tail -1
+    done
+    lb bench frame $k $static --out "$out/static4k_fine" | tail -1
+    in_tree "$old" bench frame $k $static --out "$out/static4k_old" | tail -1
+    lb bench frame $f --out "$out/pool_fine" | tail -1
+    in_tree "$old" bench frame $f --out "$out/pool_old" | tail -1
+    lb bench frame $f --per-depth --no-overlap --out "$out/pool_pd_fine" | tail -1
+    in_tree "$old" bench frame $f --per-depth --no-overlap --out "$out/pool_pd_old" | tail -1
+    ;;
+leanfine)
+    old=${OLD:?OLD: a checkout of eadbbbb}
+    [ -d "$old/scenes" ] || cp -r scenes "$old"/
+    a="--scene bench/scenes/pool_static_boat.toml --cells 1024 --size 1920 1080 --repeats 20"
+    for rep in 1 2; do
+        timeout 150 python3 bench/shadow_lean_probe.py $a --json "$out/lean_fine_$rep.json" \
+            | tail -2
+        (cd "$old" && PYTHONPATH=/tmp/site:$old timeout 150 python3 bench/shadow_lean_probe.py \
+            $a --json "$out/lean_old_$rep.json" | tail -2)
+    done
+    ;;
+order)
+    old=${OLD:?OLD: a checkout of eadbbbb}
+    [ -d "$old/scenes" ] || cp -r scenes "$old"/
+    nofallback='s/^    return trace_any_masked(TRACE_ARGS, org, dir, 0.0f, tmax, mask, TRACE_KIND_SHADOW);/    return false;/'
+    neverwalk='s/^            \&\& shadow_any_walk(TRACE_ARGS, org, dir, tmax, opaque)))/            \&\& prm->n_lights > 1000u \&\& shadow_any_walk(TRACE_ARGS, org, dir, tmax, opaque)))/'
+    variant_tree /tmp/nofallback "$nofallback" kernels/render_shadow.h
+    variant_tree /tmp/neverwalk "$neverwalk" kernels/render_shadow.h
+    a="--scene bench/scenes/pool_static_boat.toml --cells 1024 --size 1920 1080 --repeats 20"
+    probe_in() {   # probe_in DIR NAME [ARGS]
+        local w=$1 n=$2; shift 2
+        (cd "$w" && PYTHONPATH=/tmp/site:$w timeout 150 python3 bench/shadow_lean_probe.py $a \
+            "$@" --json "$out/lean_$n.json" | tail -2)
+    }
+    for rep in 1 2; do
+        probe_in "$PWD" fine_$rep
+        probe_in "$PWD" fine_first_$rep --full-first
+        probe_in "$old" old_$rep
+        probe_in "$old" old_first_$rep --full-first
+    done
+    probe_in /tmp/nofallback nofallback
+    probe_in /tmp/nofallback nofallback_first --full-first
+    probe_in /tmp/neverwalk neverwalk
     ;;
 *)
     echo "unknown PART $part" >&2

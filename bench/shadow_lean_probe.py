@@ -35,7 +35,7 @@ def event_ms(evt) -> float:
 class LeanShadowProbe:
     """The two probe kernels bound to one level of ``world``'s renderer."""
 
-    def __init__(self, world, depth: int):
+    def __init__(self, world, depth: int, full_first: bool = False):
         import pyopencl as cl
 
         from kernels.errors import InputError
@@ -56,21 +56,23 @@ class LeanShadowProbe:
         self.saved = rt.buffer(self.size)
         cl.enqueue_copy(rt.queue, self.saved, self.radiance)
         self.capacity = max(self.n, 1)
-        self.list = rt.buffer(self.capacity * RAY.itemsize)
-        self.list_counts = rt.buffer(8)
+        # the list, then the rays of full cells (LEAN_FULL_FIRST)
+        self.list = rt.buffer(2 * self.capacity * RAY.itemsize)
+        self.list_counts = rt.buffer(12)
         self.local = r.settings.local_size
         scene = r.scene.scene.trace_bindings()
         geom = r.scene.shade_bindings()
         common = {**geom, "prm": r.params_buf}
+        defines = {"LEAN_FULL_FIRST": int(full_first)}
         self.emit = rt.kernel_launcher("render_shadow_lean_probe.cl", "render_shadow_emit",
-                                       stage="probe.emit")
+                                       stage="probe.emit", defines=defines)
         self.emit.bind(**common, lights=r.scene.light_buf, rays=r.rays[depth % 2],
                        hits=r.hits[depth % 2], counts=r.counts, depth=depth,
                        radiance=self.radiance, caustic_map=r.caustic_map,
                        cprm=r.caustic_params, list=self.list, list_counts=self.list_counts,
-                       capacity=self.capacity)
+                       capacity=self.capacity, **r.light_buffer.bindings())
         self.lean = rt.kernel_launcher("render_shadow_lean_probe.cl", "render_shadow_lean",
-                                       stage="probe.lean")
+                                       stage="probe.lean", defines=defines)
         self.lean.bind(**scene, **common, **r.light_buffer.bindings(), list=self.list,
                        list_counts=self.list_counts, capacity=self.capacity,
                        radiance=self.radiance)
@@ -95,9 +97,10 @@ class LeanShadowProbe:
         import pyopencl as cl
 
         q = self.rt.queue
-        cl.enqueue_fill_buffer(q, self.list_counts, np.uint32(0), 0, 8)
+        cl.enqueue_fill_buffer(q, self.list_counts, np.uint32(0), 0, 12)
         e1 = self.emit.launch(self._size(self.n, self.local), (self.local,))
-        counts = self.rt.to_host(self.list_counts, np.uint32, 2)
+        counts = self.rt.to_host(self.list_counts, np.uint32, 3)
+        self.full_rays = int(counts[2])
         e2 = self.lean.launch(self._size(int(counts.sum()), self.local), (self.local,))
         return e1, e2, int(counts[0]), int(counts[1])
 
@@ -163,6 +166,10 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--device", help="OpenCL device (default: lbwater's choice)")
     p.add_argument("--json", help="write the numbers here")
+    p.add_argument("--light-buffer", type=int, metavar="CELLS",
+                   help="the light buffer's cells (default: the device's choice)")
+    p.add_argument("--full-first", action="store_true",
+                   help="trace the rays from full light-buffer cells first (LEAN_FULL_FIRST)")
     args = p.parse_args(argv)
 
     from kernels.errors import InputError
@@ -178,25 +185,27 @@ def measure(args) -> int:
     """Render, probe levels 0 and 1, print a line each and write the JSON."""
     from app.world import World
 
+    lb = {} if args.light_buffer is None else {"light_buffer": args.light_buffer}
     world = World(args.scene, args.device, width=args.size[0], height=args.size[1],
-                  cells=args.cells, bounces=1)
+                  cells=args.cells, bounces=1, **lb)
     for _ in range(args.settle):
         world.frame(1 / 60)
     world.frame(0.0)
     world.rt.queue.finish()
     result = {"device": world.rt.name, "date": datetime.date.today().isoformat(),
               "scene": args.scene, "size": args.size, "cells": args.cells,
-              "settle_frames": args.settle, "repeats": args.repeats, "levels": []}
+              "settle_frames": args.settle, "repeats": args.repeats,
+              "full_first": args.full_first, "levels": []}
     for depth in (0, 1):
-        probe = LeanShadowProbe(world, depth)
+        probe = LeanShadowProbe(world, depth, args.full_first)
         level = {"depth": depth, "hits": probe.n, **compare(probe),
-                 **time_level(probe, args.repeats)}
+                 "list_full_first": probe.full_rays, **time_level(probe, args.repeats)}
         if level["max_abs_diff"] > 1e-4 * level["radiance_max"]:
             raise RuntimeError(f"level {depth}: the two launches' radiance differs from "
                                f"render_shadow's by {level['max_abs_diff']:.3g}")
         result["levels"].append(level)
-        print(f"level {depth}: {probe.n} hits, list {level['list_crossing']} crossing + "
-              f"{level['list_other']} other; " + ", ".join(
+        print(f"level {depth}: {probe.n} hits, list {level['list_full_first']} full-cell first + "
+              f"{level['list_crossing']} crossing + {level['list_other']} other; " + ", ".join(
                   f"{k[:-3]} {v:.4f}" for k, v in level.items() if k.endswith("_ms")) + " ms",
               flush=True)
     result["registers"] = kernel_registers(world.rt)

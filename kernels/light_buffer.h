@@ -4,8 +4,10 @@
  * the triangles its origin's cell lists: tested there (the traversal's own triangle test, in
  * each instance's object space, the same floats as its BLAS), the answer is the any-hit
  * traversal's, bit for bit, with no tree walked. A cell that lists more than LB_SLOTS
- * triangles, or an origin off the map while some triangle reached past it, says "unknown" and
- * the ray walks the BVH as before. Built on the device from the scene's transform rows whenever
+ * triangles (under a boat's rigging) has a fine grid of LB_FINE x LB_FINE cells of its own,
+ * each listing the triangles that meet it, while the map's fine grids last. A fine cell that
+ * lists more too, or an origin off the map while some triangle reached past it, says "unknown"
+ * and the ray walks the BVH as before. Built on the device from the scene's transform rows whenever
  * they were written (light_buffer.cl); raytrace/light_buffer.py plans it. */
 #ifndef LBWATER_LIGHT_BUFFER_H
 #define LBWATER_LIGHT_BUFFER_H
@@ -19,31 +21,42 @@
 #define LB_SMALL_CELLS 32
 /* one over more cells by the whole launch */
 #define LB_MEDIUM_CELLS 4096
+/* a full cell's fine grid: LB_FINE x LB_FINE cells (on the baseline scene's map of 1024 cells,
+   the queries that walk the BVH go from 1,005 to 42 of 99,133: BENCHMARKS.md, thirteenth
+   session) */
+#define LB_FINE 8
+#define LB_FINE_CELLS (LB_FINE * LB_FINE)
 /* light_buffer_blocked's answers */
 #define LB_UNKNOWN (-1)
 #define LB_CLEAR 0
 #define LB_BLOCKED 1
 
-/* 80 bytes. Light l's map (lb_maps[l]; n_u == 0: none, its rays walk the BVH). A point p lies
+/* 96 bytes. Light l's map (lb_maps[l]; n_u == 0: none, its rays walk the BVH). A point p lies
  * in cell (floor(cu), floor(cv)), cu = dot(p, u.xyz) + u.w, likewise cv; its depth toward the
- * light is dot(p, toward.xyz). */
+ * light is dot(p, toward.xyz); in a full cell (i, j), in its fine cell (floor(LB_FINE (cu - i)),
+ * floor(LB_FINE (cv - j))). */
 typedef struct {
     float4 u;          /* xyz: the map's first axis in cells per metre; w: offset (cells) */
     float4 v;          /* xyz: the second axis; w: offset */
     float4 toward;     /* xyz: unit direction toward the light (its direction negated) */
     int n_u, n_v;      /* cells along u and v */
     int cell_base;     /* the map's first cell in lb_cells (its slots: LB_SLOTS per cell) */
-    int outside_cell;  /* lb_cells[outside_cell].x: triangles that reach off the map */
+    int outside_cell;  /* lb_cells[outside_cell].x: triangles that reach off the map; .y: fine
+                          grids handed out (light_buffer_fine) */
     int big_cell;      /* lb_cells[big_cell]: triangles left to light_buffer_raster_big (x:
                           medium, y: huge; light_buffer.cl) */
     float margin;      /* cells a triangle's footprint grows by: rounding of the projections */
     float depth_slack; /* metres a cell's depth bound grows by: rounding of the depths */
-    float pad;
+    int fine_base;     /* the map's first fine cell in lb_cells (grid g's: fine_base +
+                          g LB_FINE_CELLS + row LB_FINE + column, their slots as a cell's) */
+    int fine_grids;    /* fine grids the map has room for */
+    int pad[3];
 } LightBuffer;
 
 /* The kernel parameters of a stage that reads the light buffer (shadow rays), and their names.
  * lb_cells[c]: x = triangles listed (the first LB_SLOTS in lb_slots[c * LB_SLOTS ..]),
- * y = float_to_ordered of the nearest-to-the-light depth any of them reaches over the cell;
+ * y = float_to_ordered of the nearest-to-the-light depth any of them reaches over the cell (a
+ * fine cell's: none); a full cell's first slot holds its fine grid (-1: none, the grids ran out);
  * lb_tris: three float4 per listed triangle, its object-space vertices, p0.w = as_float(instance).
  */
 #define LIGHT_BUFFER_PARAMS                                                                   \
@@ -65,10 +78,23 @@ typedef struct {
 #define LB_CNT_FULL 4
 #define LB_CNT_OFF_MAP 5
 #define LB_CNT_TRIANGLES 6
+#define LB_CNT_FINE 7
+
+/* Whether org lies in a full cell of light l's map (its rays answered by a fine grid or a walk);
+ * bench/shadow_lean_probe.py's order of rays. */
+inline bool light_buffer_full(LIGHT_BUFFER_PARAMS, uint light, float3 org)
+{
+    const LightBuffer m = lb_maps[light];
+    const float cu = dot(org, m.u.xyz) + m.u.w, cv = dot(org, m.v.xyz) + m.v.w;
+    if (m.n_u == 0 || !(cu >= 0.0f && cu < (float)m.n_u && cv >= 0.0f && cv < (float)m.n_v))
+        return false;
+    return lb_cells[m.cell_base + (int)cv * m.n_u + (int)cu].x > LB_SLOTS;
+}
 
 /* Whether a shadow ray from org along dir (toward light l) within [0, tmax) is blocked by an
- * opaque triangle of the map: LB_BLOCKED, LB_CLEAR, or LB_UNKNOWN (no map, a full cell, off a map
- * that some triangle reached past): walk the BVH. stats: the scene's trace_stats (TRACE_COUNT). */
+ * opaque triangle of the map: LB_BLOCKED, LB_CLEAR, or LB_UNKNOWN (no map, a full cell with no
+ * fine grid or in a full fine cell, off a map that some triangle reached past): walk the BVH.
+ * stats: the scene's trace_stats (TRACE_COUNT). */
 inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* restrict instances,
                                 uint light, float3 org, float3 dir, float tmax,
                                 __global int* restrict stats)
@@ -90,14 +116,26 @@ inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* re
         LB_COUNT(LB_CNT_NEARER, 1);
         return LB_CLEAR;
     }
-    if (c.x > LB_SLOTS) {
-        LB_COUNT(LB_CNT_FULL, 1);
-        return LB_UNKNOWN;
+    int listed = cell, n = c.x;
+    if (n > LB_SLOTS) {   /* its fine cell's list, where it has a fine grid */
+        const int g = lb_slots[cell * LB_SLOTS];
+        if (g >= 0) {
+            /* cu - floor(cu) is exact (Sterbenz), and so is its product by LB_FINE */
+            const int fu = min((int)((cu - floor(cu)) * LB_FINE), LB_FINE - 1);
+            const int fv = min((int)((cv - floor(cv)) * LB_FINE), LB_FINE - 1);
+            listed = m.fine_base + g * LB_FINE_CELLS + fv * LB_FINE + fu;
+            n = lb_cells[listed].x;
+            LB_COUNT(LB_CNT_FINE, 1);
+        }
+        if (n > LB_SLOTS) {
+            LB_COUNT(LB_CNT_FULL, 1);
+            return LB_UNKNOWN;
+        }
     }
     int inst = -1;
     TraceRay r;
-    for (int k = 0; k < c.x; ++k) {
-        const int t = lb_slots[cell * LB_SLOTS + k];
+    for (int k = 0; k < n; ++k) {
+        const int t = lb_slots[listed * LB_SLOTS + k];
         const float4 p0 = lb_tris[3 * t], p1 = lb_tris[3 * t + 1], p2 = lb_tris[3 * t + 2];
         if (as_int(p0.w) != inst) {
             inst = as_int(p0.w);
@@ -111,7 +149,7 @@ inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* re
         }
     }
     LB_COUNT(LB_CNT_TESTED_CLEAR, 1);
-    LB_COUNT(LB_CNT_TRIANGLES, c.x);
+    LB_COUNT(LB_CNT_TRIANGLES, n);
     return LB_CLEAR;
 }
 

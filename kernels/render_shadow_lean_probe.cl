@@ -11,9 +11,16 @@
  * [1]), so whole warps take alike rays. render_shadow_lean traces the list alone: the same
  * shadow_transmittance, then radiance[i] += T w E brdf. With one light per scene the two give
  * render_shadow's radiance up to rounding (w E brdf T summed in another order); with several, two
- * entries of one hit could add to radiance[i] at once, so the probe takes one light. */
+ * entries of one hit could add to radiance[i] at once, so the probe takes one light.
+ * Built with LEAN_FULL_FIRST=1, the rays whose origin lies in a full light-buffer cell (more
+ * than LB_SLOTS triangles: a fine grid's cells or a BVH walk answer them) go first, in a list of
+ * their own (list_counts[2], from list[capacity]), so that the costliest start first. */
 #include "common.h"
 #include "render_shadow.h"
+
+#ifndef LEAN_FULL_FIRST
+#define LEAN_FULL_FIRST 0
+#endif
 
 __kernel void render_shadow_emit(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
                                  __global const Light* restrict lights,
@@ -22,11 +29,12 @@ __kernel void render_shadow_emit(RENDER_GEOM_PARAMS, __constant const RenderPara
                                  const uint depth, __global float4* restrict radiance,
                                  __global const float4* restrict caustic_map,
                                  const CausticParams cprm, __global Ray* restrict list,
-                                 __global uint* restrict list_counts, const uint capacity)
+                                 __global uint* restrict list_counts, const uint capacity,
+                                 LIGHT_BUFFER_PARAMS)
 {
     /* a work-group's entries of one light take consecutive slots: one global atomic per list
        and work-group (a scan's cost), not one per ray */
-    __local uint group_count[2], group_base[2];
+    __local uint group_count[3], group_base[3];
     const uint n = counts[depth], lid = get_local_id(0);
     for (uint base = get_group_id(0) * get_local_size(0); base < n;
          base += get_num_groups(0) * get_local_size(0)) {   /* uniform over the work-group */
@@ -36,7 +44,7 @@ __kernel void render_shadow_emit(RENDER_GEOM_PARAMS, __constant const RenderPara
         float3 sum = (float3)(0.0f);
         if (site && o.caustic) sum = caustic_lookup(caustic_map, &cprm, o.s.p, o.nf_g) * o.s.kd;
         for (uint l = 0; l < prm->n_lights; l++) {   /* uniform */
-            if (lid < 2) group_count[lid] = 0;
+            if (lid < 3) group_count[lid] = 0;
             barrier(CLK_LOCAL_MEM_FENCE);
             float3 ldir, E, brdf;
             float dist;
@@ -47,12 +55,15 @@ __kernel void render_shadow_emit(RENDER_GEOM_PARAMS, __constant const RenderPara
                 else traced = true;
             }
             const bool crossing = site && o.medium >= 0;
-            const uint k = traced ? atomic_inc(&group_count[crossing ? 0 : 1]) : 0u;
+            const bool full = LEAN_FULL_FIRST && traced
+                              && light_buffer_full(LIGHT_BUFFER_ARGS, l, o.org);
+            const uint cls = full ? 2u : crossing ? 0u : 1u;
+            const uint k = traced ? atomic_inc(&group_count[cls]) : 0u;
             barrier(CLK_LOCAL_MEM_FENCE);
-            if (lid < 2) group_base[lid] = atomic_add(&list_counts[lid], group_count[lid]);
+            if (lid < 3) group_base[lid] = atomic_add(&list_counts[lid], group_count[lid]);
             barrier(CLK_LOCAL_MEM_FENCE);
             if (traced) {
-                const uint slot = group_base[crossing ? 0 : 1] + k;
+                const uint slot = group_base[cls] + k;
                 const float3 c = o.w * E * brdf;
                 Ray s;
                 s.ox = o.org.x;
@@ -67,7 +78,7 @@ __kernel void render_shadow_emit(RENDER_GEOM_PARAMS, __constant const RenderPara
                 s.wg = c.y;
                 s.wb = c.z;
                 s.sample = as_uint(dist);
-                list[crossing ? slot : capacity - 1u - slot] = s;
+                list[full ? capacity + slot : crossing ? slot : capacity - 1u - slot] = s;
             }
         }
         if (site) radiance[i] += (float4)(o.w * sum, 0.0f);
@@ -80,9 +91,11 @@ __kernel void render_shadow_lean(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_
                                  __global const uint* restrict list_counts, const uint capacity,
                                  __global float4* restrict radiance)
 {
-    const uint front = list_counts[0], n = front + list_counts[1];
+    const uint first = list_counts[2], front = first + list_counts[0];
+    const uint n = front + list_counts[1];
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
-        const Ray s = list[j < front ? j : capacity - 1u - (j - front)];
+        const Ray s = list[j < first ? capacity + j
+                           : j < front ? j - first : capacity - 1u - (j - front)];
         const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS,
                                               LIGHT_BUFFER_ARGS, prm, 0u, ray_org(&s),
                                               ray_dir(&s), as_float(s.sample), s.medium);

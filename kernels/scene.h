@@ -58,10 +58,11 @@
 #define TRACE_STAT_HF_SKIPPED 3
 /* TRACE_COUNT builds: the light buffer's answers (light_buffer.h), TRACE_STAT_LB_FIELDS from
    TRACE_STAT_LB: origins whose cell lists nothing, nearer the light than the cell's bound, in a
-   cell whose triangles were tested clear, blocked by one of them, in a full cell, off the map;
-   then the triangles tested */
+   cell whose triangles were tested clear, blocked by one of them, in a full cell (with no fine
+   grid, or in a full fine cell), off the map; then the triangles tested, and the origins looked
+   up in a full cell's fine grid */
 #define TRACE_STAT_LB 4
-#define TRACE_STAT_LB_FIELDS 7
+#define TRACE_STAT_LB_FIELDS 8
 /* Traversal work counters, written only by TRACE_COUNT=1 builds (a debug define, traverse.h;
    raytrace.scene.Scene.trace_counts reads them): per ray kind, TRACE_COUNT_FIELDS uint sums
    from TRACE_STAT_COUNT, then per kind the BLAS nodes visited per instance (ids above

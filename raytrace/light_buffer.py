@@ -8,12 +8,17 @@ walking the TLAS and BLASes, and fall back to the walk where a cell lists more t
 What it covers: the instances the shadow rays' any-hit query sees (the opaque ones when the
 scene has a dielectric, else all), when each is a mesh the host holds; none otherwise (a height
 field, a mesh given as device buffers), and no spot light (their rays walk the BVH as before).
+A cell that lists more (a boat's rigging, whose tiny triangles stack along the light) gets a
+fine grid of ``LB_FINE`` x ``LB_FINE`` cells of its own while the map's grids last
+(:func:`fine_grids_for`); only a full fine cell leaves its rays to the walk.
 
 Per build (:meth:`LightBuffer.enqueue`, when the transform rows were written since the last):
 ``light_buffer_clear`` over every map's cells, then per map ``light_buffer_raster`` (a work-item
 per triangle, moved by its instance's live transform row: a boat that a device stage moves is
 followed with no host copy) and ``light_buffer_raster_big`` (the triangles over more than 32
-cells: a work-group each, or the whole launch for those over 4096).
+cells: a work-group each, or the whole launch for those over 4096), ``light_buffer_fine`` (the
+full cells' grids handed out), and the two raster kernels again, listing the full cells'
+triangles in their fine cells.
 """
 
 from __future__ import annotations
@@ -25,12 +30,14 @@ from kernels.runtime import Runtime
 from raytrace.render_types import MAX_LIGHTS, LightKind
 
 _F4 = (np.float32, 4)
-#: Mirror of ``LightBuffer`` (kernels/light_buffer.h), 80 bytes.
+#: Mirror of ``LightBuffer`` (kernels/light_buffer.h), 96 bytes.
 LIGHT_BUFFER = np.dtype([("u", _F4), ("v", _F4), ("toward", _F4), ("n_u", np.int32),
                          ("n_v", np.int32), ("cell_base", np.int32), ("outside_cell", np.int32),
                          ("big_cell", np.int32), ("margin", np.float32),
-                         ("depth_slack", np.float32), ("pad", np.float32)])
+                         ("depth_slack", np.float32), ("fine_base", np.int32),
+                         ("fine_grids", np.int32), ("pad", np.int32, 3)])
 LB_SLOTS = 16           #: kernels/light_buffer.h
+LB_FINE = 8             #: kernels/light_buffer.h: a fine grid's cells along each side
 #: Most cells along a map's side.
 MAX_CELLS = 8192
 #: Most triangles listed: past it the per-frame raster would cost more than the walks it saves.
@@ -42,16 +49,26 @@ DOMAIN_PAD = 0.1
 _MAX_ITEMS = 1 << 20
 
 
+def fine_grids_for(map_cells: int) -> int:
+    """Fine grids a map of ``map_cells`` cells has room for: one per 256 cells (3,072 at the
+    baseline scene's 1024 x 768, which fills 1,431; 4.5 KiB a grid), at least 16."""
+    return max(16, map_cells // 256)
+
+
 class LightBuffer:
     """The maps of one renderer: ``cells`` along a map's longer side (0: none)."""
 
-    def __init__(self, rt: Runtime, cells: int, stage: str = "render.light_buffer"):
+    def __init__(self, rt: Runtime, cells: int, stage: str = "render.light_buffer",
+                 fine_grids: int | None = None):
         # checked with the settings (RenderSettings.resolved: [0, MAX_CELLS])
         self.rt, self.cells, self.stage = rt, int(cells), stage
+        #: fine grids per map (None: :func:`fine_grids_for` its cells; tests and studies)
+        self.fine_grids = fine_grids
         self.maps = np.zeros(MAX_LIGHTS, LIGHT_BUFFER)
         self.n_tris = 0
         self.n_cells = 0               #: cells of every map, then two counters per map
         self.n_map_cells = 0           #: cells of every map
+        self.n_fine_cells = 0          #: the maps' fine grids' cells, after n_cells
         self.reason = "not planned"    #: why no light has a map ("" when one has)
         self._key = None
         self._generation = 0           # plans made (each replaces the buffers)
@@ -68,10 +85,11 @@ class LightBuffer:
                 self.rt.kernel_launcher("light_buffer.cl", f"light_buffer_{name}",
                                         stage=f"{self.stage}.{stage}")
                 for name, stage in (("clear", "clear"), ("raster", "raster"),
-                                    ("raster_big", "big")))
+                                    ("raster_big", "big"), ("fine", "fine")))
         return self._kernels
 
     def _alloc(self, tris: np.ndarray, n_cells: int) -> None:
+        """The buffers for ``n_cells`` cells, counters and fine cells."""
         rt = self.rt
         self.maps_buf = rt.to_device(self.maps)
         self.tris_buf = rt.to_device(tris)
@@ -121,8 +139,15 @@ class LightBuffer:
                 self.maps[i]["big_cell"] = n_cells + 2 * k + 1
             n_cells += 2 * len(directional)
         self.n_tris = 0 if self.reason else len(tris) // 3
-        self.n_cells = n_cells
-        self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells)
+        self.n_cells, n_fine = n_cells, 0
+        for i in directional if not self.reason else ():   # their fine grids after the counters
+            m = self.maps[i]
+            grids = (fine_grids_for(int(m["n_u"] * m["n_v"])) if self.fine_grids is None
+                     else int(self.fine_grids))
+            m["fine_base"], m["fine_grids"] = n_cells + n_fine, grids
+            n_fine += grids * LB_FINE * LB_FINE
+        self.n_fine_cells = n_fine
+        self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells + n_fine)
         return True
 
     def _triangles(self, render_scene, masks, mask: int) -> tuple[np.ndarray, str]:
@@ -203,7 +228,7 @@ class LightBuffer:
             return False
         self._built = key
         self.builds += 1
-        clear, raster, raster_big = self._launchers()
+        clear, raster, raster_big, fine = self._launchers()
         clear.bind(lb_cells=self.cells_buf, n_cells=self.n_cells, n_map_cells=self.n_map_cells)
         clear.launch(self.n_cells, 256)
         if self.n_tris == 0:
@@ -212,18 +237,27 @@ class LightBuffer:
                 "lb_cells": self.cells_buf, "lb_slots": self.slots_buf, "lb_big": self.big_buf}
         raster.bind(**bufs, n_tris=self.n_tris)
         raster_big.bind(**bufs, n_tris=self.n_tris)
+        fine.bind(lb_maps=self.maps_buf, lb_cells=self.cells_buf, lb_slots=self.slots_buf)
         items = min(self.n_tris, _MAX_ITEMS)
         for light in np.flatnonzero(self.maps["n_u"] > 0):
-            raster.bind(light=int(light))
-            raster.launch(-(-items // 64) * 64, 64)
-            raster_big.bind(light=int(light))
-            raster_big.launch(self._big_items, 256)
+            m = self.maps[light]
+            for second in (0, 1):   # the cells, then the full cells' fine grids
+                if second:
+                    fine.bind(light=int(light))
+                    fine.launch(-(-int(m["n_u"] * m["n_v"]) // 256) * 256, 256)
+                raster.bind(light=int(light), fine=second)
+                raster.launch(-(-items // 64) * 64, 64)
+                raster_big.bind(light=int(light), fine=second)
+                raster_big.launch(self._big_items, 256)
         return True
 
     def read(self, light: int) -> dict:
         """Light ``light``'s map as host arrays (synchronises; tests and studies): ``count``
         and ``depth`` (n_v, n_u), ``slots`` (n_v, n_u, LB_SLOTS), ``outside`` (triangles that
-        reached off the map) and ``big`` (those left to light_buffer_raster_big)."""
+        reached off the map), ``big`` (those left to light_buffer_raster_big), ``grid`` (n_v,
+        n_u: each full cell's fine grid, -1 none or not full), ``fine_grids`` (grids the full
+        cells asked for, handed out or not), and the grids' ``fine_count`` (grids, LB_FINE,
+        LB_FINE) and ``fine_slots`` (grids, LB_FINE, LB_FINE, LB_SLOTS)."""
         m = self.maps[light]
         if m["n_u"] == 0:
             raise ValueError(f"light {light} has no map ({self.reason or 'not directional'})")
@@ -233,10 +267,21 @@ class LightBuffer:
         counters = self.rt.to_host(self.cells_buf, np.int32, 4, 2 * int(m["outside_cell"]))
         slots = self.rt.to_host(self.slots_buf, np.int32, LB_SLOTS * n, LB_SLOTS * base)
         shape = (int(m["n_v"]), int(m["n_u"]))
-        return {"count": cells[:n, 0].reshape(shape),
-                "depth": ordered_to_float(cells[:n, 1]).reshape(shape),
-                "slots": slots.reshape(*shape, LB_SLOTS), "outside": int(counters[0]),
-                "big": int(counters[2] + counters[3])}
+        count = cells[:n, 0].reshape(shape)
+        slots = slots.reshape(*shape, LB_SLOTS)
+        asked = int(counters[1])
+        g, fb = min(asked, int(m["fine_grids"])), int(m["fine_base"])
+        per = LB_FINE * LB_FINE
+        fine = self.rt.to_host(self.cells_buf, np.int32, 2 * max(g * per, 1), 2 * fb)
+        fslots = self.rt.to_host(self.slots_buf, np.int32, LB_SLOTS * max(g * per, 1),
+                                 LB_SLOTS * fb)
+        return {"count": count, "depth": ordered_to_float(cells[:n, 1]).reshape(shape),
+                "slots": slots, "outside": int(counters[0]),
+                "big": int(counters[2] + counters[3]),
+                "grid": np.where(count > LB_SLOTS, slots[..., 0], -1), "fine_grids": asked,
+                "fine_count": fine[0:2 * g * per:2].reshape(g, LB_FINE, LB_FINE),
+                "fine_slots": fslots[:LB_SLOTS * g * per].reshape(g, LB_FINE, LB_FINE,
+                                                                   LB_SLOTS)}
 
 
 def ordered_to_float(i: np.ndarray) -> np.ndarray:

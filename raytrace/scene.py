@@ -52,7 +52,7 @@ TRACE_STAT_HF_SKIPPED = 3
 #: (kernels/light_buffer.h).
 TRACE_STAT_LB = 4
 LIGHT_BUFFER_COUNT_FIELDS = ("empty", "nearer", "tested_clear", "blocked", "full", "off_map",
-                             "triangles")
+                             "triangles", "fine")
 #: The traversal work counters of TRACE_COUNT builds (kernels/scene.h): ray kinds and fields.
 TRACE_KINDS = ("query", "primary", "secondary", "shadow", "photon", "crossing")
 TRACE_COUNT_FIELDS = ("rays", "traversals", "tlas_nodes", "blas_entries", "blas_nodes",

@@ -4,13 +4,14 @@ their depth bounds hold over the cell (float64 clipping), its answers are the BV
 answers, and frames rendered with it are the frames rendered without it, byte for byte."""
 
 import dataclasses
+import types
 
 import numpy as np
 import pyopencl as cl
 import pytest
 
 from kernels.layout import check_struct
-from raytrace.light_buffer import LB_SLOTS, LIGHT_BUFFER, LightBuffer
+from raytrace.light_buffer import LB_FINE, LB_SLOTS, LIGHT_BUFFER, LightBuffer
 from raytrace.render import Renderer, RenderSettings
 from raytrace.render_scene import Material, RenderScene
 from raytrace.render_types import MASK_OPAQUE
@@ -24,7 +25,7 @@ def test_layout_matches_the_device(rt):
     from kernels.runtime import KERNEL_DIR
 
     check_struct(rt, "light_buffer.h", "LightBuffer", LIGHT_BUFFER)
-    assert LIGHT_BUFFER.itemsize == 80
+    assert LIGHT_BUFFER.itemsize == 96
     assert f"#define LB_SLOTS {LB_SLOTS}\n" in (KERNEL_DIR / "light_buffer.h").read_text()
 
 
@@ -65,9 +66,9 @@ def clutter(rt, *, glass: bool = True, spot: bool = False, seed: int = 3) -> Ren
     return sc
 
 
-def built(rt, sc, cells: int) -> LightBuffer:
+def built(rt, sc, cells: int, **kw) -> LightBuffer:
     sc.update()
-    lb = LightBuffer(rt, cells)
+    lb = LightBuffer(rt, cells, **kw)
     lb.plan(sc, MASK_OPAQUE if sc.has_dielectric else 0xFFFFFFFF)
     lb.enqueue(sc.transform_buffer)
     return lb
@@ -173,6 +174,41 @@ def test_cells_list_what_a_float64_raster_finds(rt):
     assert (coarse > LB_SLOTS).any()
 
 
+def test_fine_cells_list_what_a_float64_raster_finds(rt):
+    """A coarse map's full cells (3 of 9) each get a fine grid whose cells list every triangle that
+    meets them (the float64 raster of the map LB_FINE times finer) and none beyond a quarter
+    cell; a cell that is not full has none."""
+    sc = clutter(rt)
+    lb = built(rt, sc, 3)
+    got = lb.read(0)
+    full = got["count"] > LB_SLOTS
+    assert 0 < full.sum() == got["fine_grids"] <= lb.maps[0]["fine_grids"]
+    assert (got["grid"][~full] == -1).all()
+    grids = got["grid"][full]
+    assert sorted(grids.tolist()) == list(range(full.sum()))   # one each, none twice
+    fine_map = types.SimpleNamespace(maps=lb.maps.copy())
+    for k in ("u", "v"):
+        fine_map.maps[0][k] *= LB_FINE
+    for k in ("n_u", "n_v"):
+        fine_map.maps[0][k] *= LB_FINE
+    world, _ = world_triangles(sc, lb)
+    must = reference_cells(fine_map, 0, world, 0.0)
+    may = reference_cells(fine_map, 0, world, 2.0)
+    checked = 0
+    for j, i in zip(*np.nonzero(full), strict=True):
+        g = got["grid"][j, i]
+        for b in range(LB_FINE):
+            for a in range(LB_FINE):
+                key = (j * LB_FINE + b, i * LB_FINE + a)
+                tris, n = must.get(key, {}), got["fine_count"][g, b, a]
+                assert len(tris) <= n <= len(may.get(key, {})), key
+                if n <= LB_SLOTS:
+                    assert set(tris) <= set(got["fine_slots"][g, b, a, :n].tolist()), key
+                checked += len(tris)
+    assert checked > 0
+    assert (got["fine_count"] <= LB_SLOTS).mean() > 0.9   # what a fine cell is for
+
+
 def answers(rt, sc, lb, light, org):
     k = rt.kernel_launcher("light_buffer.cl", "light_buffer_answers", stage="test",
                            defines=sc.scene.trace_defines)
@@ -204,9 +240,13 @@ def brute_force_blocked(world, org, toward) -> np.ndarray:
     return hit.any(1), (near & (t > 0)).any(1)
 
 
-def test_answers_are_the_bvh_any_hit(rt):
+@pytest.mark.parametrize("cells", [40, 3])
+def test_answers_are_the_bvh_any_hit(rt, cells):
+    """At 3 cells a third of the map is full cells: their fine grids answer."""
     sc = clutter(rt)
-    lb = built(rt, sc, 40)
+    lb = built(rt, sc, cells)
+    if cells == 3:
+        assert (lb.read(0)["count"] > LB_SLOTS).mean() > 0.3
     rng = np.random.default_rng(7)
     world, _ = world_triangles(sc, lb)
     # points on the floor (offset up), on the triangles, and in the air
@@ -229,15 +269,17 @@ def test_answers_are_the_bvh_any_hit(rt):
     assert np.array_equal(got[sure, 0] == 1, blocked[sure])
 
 
-def test_counters_say_how_each_query_was_answered(rt):
+@pytest.mark.parametrize("grids", [None, 1])
+def test_counters_say_how_each_query_was_answered(rt, grids):
     """TRACE_COUNT builds count the map's answers by kind (Scene.trace_counts()
     ["light_buffer"]): they add up to the queries and agree with the answers given, with a
-    float64 look-up of the origins' cells, and with the triangles the listed cells hold."""
+    float64 look-up of the origins' cells, and with the triangles the listed cells hold. The
+    full cells' origins look in their fine grids (grids=1: one grid, the others' walk)."""
     from kernels.runtime import Runtime
 
     counting = Runtime(rt.device, defines={"TRACE_COUNT": 1})
     sc = clutter(counting)
-    lb = built(counting, sc, 6)   # coarse: full cells too
+    lb = built(counting, sc, 6, fine_grids=grids)   # coarse: full cells too
     rng = np.random.default_rng(5)
     n = 4000
     org = rng.uniform((-2.2, 0.0, -2.2), (2.2, 1.4, 2.2), (n, 3)).astype(np.float32)
@@ -247,9 +289,9 @@ def test_counters_say_how_each_query_was_answered(rt):
     kinds = ("empty", "nearer", "tested_clear", "blocked", "full", "off_map")
     assert sum(c[k] for k in kinds) == n
     assert c["blocked"] == (got == 1).sum() > 0
-    assert c["full"] == (got == -1).sum() > 0   # nothing reaches off this map: full cells only
+    assert c["full"] == (got == -1).sum()   # nothing reaches off this map: full cells only
     assert c["empty"] + c["nearer"] + c["tested_clear"] + c["off_map"] == (got == 0).sum()
-    assert min(c[k] for k in kinds) > 0
+    assert min(c[k] for k in kinds if k != "full") > 0
     # float64: the origins' cells (a few on a cell's edge may round the other way)
     m, cells = lb.maps[0], lb.read(0)
     o = org.astype(np.float64)
@@ -260,9 +302,29 @@ def test_counters_say_how_each_query_was_answered(rt):
     count = np.zeros(n, np.int64)
     count[on] = cells["count"][cv[on].astype(int), cu[on].astype(int)]
     assert abs(c["empty"] - (on & (count == 0)).sum()) <= 0.01 * n
-    assert abs(c["full"] - (count > LB_SLOTS).sum()) <= 0.01 * n
+    # the origins in full cells: those with a grid look in it; with none, or in a full fine
+    # cell, they walk
+    grid = np.full(n, -1)
+    grid[on] = cells["grid"][cv[on].astype(int), cu[on].astype(int)]
+    full = on & (count > LB_SLOTS)
+    assert full.sum() > 0.05 * n
+    assert abs(c["fine"] - (full & (grid >= 0)).sum()) <= 0.01 * n
+    fu = np.minimum(((cu - np.floor(cu)) * LB_FINE).astype(int), LB_FINE - 1)
+    fv = np.minimum(((cv - np.floor(cv)) * LB_FINE).astype(int), LB_FINE - 1)
+    fine = np.zeros(n, np.int64)
+    in_grid = full & (grid >= 0)
+    fine[in_grid] = cells["fine_count"][grid[in_grid], fv[in_grid], fu[in_grid]]
+    left = full & ((grid < 0) | (fine > LB_SLOTS))
+    assert abs(c["full"] - left.sum()) <= 0.01 * n
+    if grids is None:   # room for every full cell: the fine cells answer most
+        assert cells["fine_grids"] == (cells["count"] > LB_SLOTS).sum() <= lb.maps[0]["fine_grids"]
+        assert c["full"] < 0.1 * c["fine"]
+    else:
+        assert cells["fine_grids"] > 1 and (cells["grid"] >= 0).sum() == 1
+        assert c["full"] > 0
     # a cell tested clear tests all its triangles, a blocked one at least one
-    tested = count[on & (count > 0) & (count <= LB_SLOTS)]
+    listed = np.where(full, fine, count)
+    tested = listed[on & (listed > 0) & (listed <= LB_SLOTS)]
     assert c["tested_clear"] + c["blocked"] <= c["triangles"] <= tested.sum() + 0.01 * n * LB_SLOTS
 
 
@@ -281,12 +343,13 @@ def test_rays_off_the_map_walk_the_bvh_once_a_triangle_leaves_it(rt):
 
 
 # -- frames with and without it ----------------------------------------------------------
-def frames_alike(rt, sc, settings, camera=CAMERAS[1], moves=()):
-    """The frames of ``sc`` with the map and without it, the instances moved between them."""
+def frames_alike(rt, sc, settings, camera=CAMERAS[1], moves=(), cells=48):
+    """The frames of ``sc`` with a map of ``cells`` and without one, the instances moved
+    between them."""
     start = sc.scene.read_host_transforms()
     out = []
-    for cells in (0, 48):
-        r = Renderer(rt, sc, dataclasses.replace(settings, light_buffer=cells))
+    for n in (0, cells):
+        r = Renderer(rt, sc, dataclasses.replace(settings, light_buffer=n))
         r.set_camera(*camera, (0, 1, 0), 50)
         imgs = [r.render()]
         for inst, m in moves:
@@ -302,20 +365,26 @@ def frames_alike(rt, sc, settings, camera=CAMERAS[1], moves=()):
     return r_on
 
 
-@pytest.mark.parametrize("chunk,coop_from,bins", [(None, None, False), (96, None, False),
-                                                   (None, 1, True)])
-def test_frames_are_the_frames_without_it(rt, chunk, coop_from, bins):
-    """Every shadow kernel: alone, with the next level's trace, binned, cooperative."""
+@pytest.mark.parametrize("chunk,coop_from,bins,cells", [
+    (None, None, False, 48), (96, None, False, 48), (None, 1, True, 48), (None, None, False, 3),
+    (None, 1, True, 3)])
+def test_frames_are_the_frames_without_it(rt, chunk, coop_from, bins, cells):
+    """Every shadow kernel: alone, with the next level's trace, binned, cooperative; at 3
+    cells, through the full cells' fine grids."""
     s = RenderSettings(width=24, height=18, bounces=3, spp=4, max_chunk_rays=chunk,
                        coop_from=coop_from, cost_bins=bins, overlap_from=0)
-    r = frames_alike(rt, clutter(rt), s)
-    assert r.light_buffer.active and r.light_buffer.read(0)["count"].sum() > 0
+    r = frames_alike(rt, clutter(rt), s, cells=cells)
+    got = r.light_buffer.read(0)
+    assert r.light_buffer.active and got["count"].sum() > 0
+    assert (cells == 3) == (got["fine_grids"] > 0)
 
 
-def test_frames_follow_a_moved_instance(rt):
+@pytest.mark.parametrize("cells", [48, 3])
+def test_frames_follow_a_moved_instance(rt, cells):
+    """At 3 cells each build hands the full cells their fine grids again, emptied."""
     s = RenderSettings(width=24, height=18, bounces=2)
     m = np.array([[0, 0, 1, -0.3], [0, 1, 0, 0.1], [-1, 0, 0, 0.2], [0, 0, 0, 1]])
-    frames_alike(rt, clutter(rt, glass=False), s, moves=[(1, m)])
+    frames_alike(rt, clutter(rt, glass=False), s, moves=[(1, m)], cells=cells)
 
 
 def test_spot_lights_walk_the_bvh_and_directional_ones_use_their_map(rt):
