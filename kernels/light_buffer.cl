@@ -12,11 +12,16 @@
  *   light_buffer_raster_big  a work-group per such triangle (a boat's sail), or the whole
  *                        launch, one after the other, for those over LB_MEDIUM_CELLS (the pool's
  *                        floor and walls)
+ *                        Both list each (triangle, cell) past a cell's LB_SLOTS in lb_pairs.
  *   light_buffer_fine    per map: a work-item per cell hands each full cell (more than LB_SLOTS
- *                        triangles) a fine grid while the map's last, its number in the cell's
- *                        first slot, and empties the grid
- *   light_buffer_raster, light_buffer_raster_big again with `fine` set: every triangle listed
- *                        in a full cell with a grid is listed in the grid's fine cells it meets
+ *                        triangles) a fine grid while the map's last, empties it, lists its
+ *                        slots' triangles in lb_pairs too, and puts the grid's number in its
+ *                        first slot
+ *   light_buffer_fine_raster  LB_FINE work-items per pair list the triangle in the fine cells it
+ *                        meets, a row each: every triangle of a full cell with a grid, in
+ *                        parallel however many cells the triangle covers (a raster pass over
+ *                        the triangles, one after another in a work-item, took 20 times longer
+ *                        for the pool's floating boat on the H200: BENCHMARKS.md)
  * The order in which triangles land in a cell's slots varies, and so does which full cells get
  * a grid when they run out; what a query answers does not. */
 #include "common.h"
@@ -97,50 +102,41 @@ inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restri
     return o;
 }
 
-/* Triangle t in the fine cells of full cell (i, j) that its footprint meets, where the cell
- * has a fine grid. A fine cell's box is exact in floats ((i LB_FINE + a) / LB_FINE), and grows
- * by the same margin as a cell's: the fine cell a query reads holds its origin's projection. */
-inline void lb_insert_fine(const LightBuffer* m, const LbTriangle* o, uint t, int i, int j,
-                           int cell, __global int* restrict cells, __global int* restrict lb_slots)
+/* Row b of the fine grid g of full cell (i, j): list triangle t in the fine cells its footprint
+ * meets. A fine cell's box is exact in floats ((i LB_FINE + a) / LB_FINE), and grows by the same
+ * margin as a cell's: the fine cell a query reads holds its origin's projection. */
+inline void lb_insert_fine_row(const LightBuffer* m, const LbTriangle* o, uint t, int i, int j,
+                               int g, int b, __global int* restrict cells,
+                               __global int* restrict lb_slots)
 {
-    if (cells[2 * cell] <= LB_SLOTS) return;
-    const int g = lb_slots[cell * LB_SLOTS];
-    if (g < 0) return;
     const float2 lo = fmin(o->a, fmin(o->b, o->c)) - m->margin;
     const float2 hi = fmax(o->a, fmax(o->b, o->c)) + m->margin;
+    const float y0 = (float)(j * LB_FINE + b) / (float)LB_FINE - m->margin;
+    const float y1 = (float)(j * LB_FINE + b + 1) / (float)LB_FINE + m->margin;
+    if (hi.y < y0 || lo.y > y1) return;
     const int a0 = max((int)floor((lo.x - (float)i) * LB_FINE), 0);
     const int a1 = min((int)floor((hi.x - (float)i) * LB_FINE), LB_FINE - 1);
-    const int b0 = max((int)floor((lo.y - (float)j) * LB_FINE), 0);
-    const int b1 = min((int)floor((hi.y - (float)j) * LB_FINE), LB_FINE - 1);
-    for (int b = b0; b <= b1; ++b) {
-        for (int a = a0; a <= a1; ++a) {
-            const float2 flo = (float2)((float)(i * LB_FINE + a), (float)(j * LB_FINE + b))
-                                   / (float)LB_FINE - m->margin;
-            const float2 fhi = (float2)((float)(i * LB_FINE + a + 1),
-                                        (float)(j * LB_FINE + b + 1)) / (float)LB_FINE
-                               + m->margin;
-            if (!lb_overlaps(o->a, o->b, o->c, flo, fhi)) continue;
-            const int f = m->fine_base + g * LB_FINE_CELLS + b * LB_FINE + a;
-            const int slot = atomic_inc(cells + 2 * f);
-            if (slot < LB_SLOTS) lb_slots[f * LB_SLOTS + slot] = (int)t;
-        }
+    for (int a = a0; a <= a1; ++a) {
+        const float2 flo = (float2)((float)(i * LB_FINE + a) / (float)LB_FINE - m->margin, y0);
+        const float2 fhi = (float2)((float)(i * LB_FINE + a + 1) / (float)LB_FINE + m->margin,
+                                    y1);
+        if (!lb_overlaps(o->a, o->b, o->c, flo, fhi)) continue;
+        const int f = m->fine_base + g * LB_FINE_CELLS + b * LB_FINE + a;
+        const int slot = atomic_inc(cells + 2 * f);
+        if (slot < LB_SLOTS) lb_slots[f * LB_SLOTS + slot] = (int)t;
     }
 }
 
-/* Cell k of the triangle's box: list triangle t there when its footprint meets the cell (fine:
- * in the cell's fine grid instead, light_buffer_fine having handed out the grids). */
+/* Cell k of the triangle's box: list triangle t there when its footprint meets the cell; past
+ * the cell's slots, the pair (t, cell) in lb_pairs for its fine grid. */
 inline void lb_insert(const LightBuffer* m, const LbTriangle* o, uint t, int k,
-                      __global int* restrict cells, __global int* restrict lb_slots, bool fine)
+                      __global int* restrict cells, __global int* restrict lb_slots,
+                      __global int2* restrict lb_pairs)
 {
     const int i = o->i0 + k % o->w, j = o->j0 + k / o->w;
-    if (fine && cells[2 * (m->cell_base + j * m->n_u + i)] <= LB_SLOTS) return;   /* cheap */
     const float2 clo = (float2)((float)i, (float)j) - m->margin;
     const float2 chi = (float2)((float)(i + 1), (float)(j + 1)) + m->margin;
     if (!lb_overlaps(o->a, o->b, o->c, clo, chi)) return;
-    if (fine) {
-        lb_insert_fine(m, o, t, i, j, m->cell_base + j * m->n_u + i, cells, lb_slots);
-        return;
-    }
     float bound = o->smax;
     if (o->plane) {   /* the plane's most over the cell's corners, at most the nearest vertex */
         const float2 d0 = clo - o->a, d1 = chi - o->a;
@@ -149,39 +145,41 @@ inline void lb_insert(const LightBuffer* m, const LbTriangle* o, uint t, int k,
     }
     const int cell = m->cell_base + j * m->n_u + i;
     const int slot = atomic_inc(cells + 2 * cell);
-    if (slot < LB_SLOTS) lb_slots[cell * LB_SLOTS + slot] = (int)t;
+    if (slot < LB_SLOTS) {
+        lb_slots[cell * LB_SLOTS + slot] = (int)t;
+    } else {
+        const int p = atomic_inc(cells + 2 * m->fine_cell + 1);
+        if (p < m->fine_pairs) lb_pairs[p] = (int2)((int)t, cell);
+    }
     atomic_max(cells + 2 * cell + 1, float_to_ordered(bound + o->slack));
 }
 
-/* fine: the second pass (the fine grids; the big triangles listed by the first) */
 __kernel void light_buffer_raster(__global const LightBuffer* restrict lb_maps, const uint light,
                                   __global const float4* restrict lb_tris, const uint n_tris,
                                   __global const Transform* restrict xforms,
                                   __global int2* restrict lb_cells,
                                   __global int* restrict lb_slots, __global uint* restrict lb_big,
-                                  const uint fine)
+                                  __global int2* restrict lb_pairs)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
     for (uint t = get_global_id(0); t < n_tris; t += get_global_size(0)) {
-        const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, !fine);
-        if (o.n > LB_SMALL_CELLS) {
-            if (fine) continue;
-            if (o.n > LB_MEDIUM_CELLS)   /* huge: from the list's back */
-                lb_big[n_tris - 1u - atomic_inc(cells + 2 * m.big_cell + 1)] = t;
-            else   /* medium: from its front */
-                lb_big[atomic_inc(cells + 2 * m.big_cell)] = t;
-        } else {
-            for (int k = 0; k < o.n; ++k) lb_insert(&m, &o, t, k, cells, lb_slots, fine);
-        }
+        const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, true);
+        if (o.n > LB_MEDIUM_CELLS)   /* huge: from the list's back */
+            lb_big[n_tris - 1u - atomic_inc(cells + 2 * m.big_cell + 1)] = t;
+        else if (o.n > LB_SMALL_CELLS)   /* medium: from its front */
+            lb_big[atomic_inc(cells + 2 * m.big_cell)] = t;
+        else
+            for (int k = 0; k < o.n; ++k) lb_insert(&m, &o, t, k, cells, lb_slots, lb_pairs);
     }
 }
 
-/* Every full cell of map `light`: a fine grid, while the map's fine_grids last (its number in
- * the cell's first slot, which a full cell's query does not read as a triangle; -1: none), its
- * fine cells emptied. */
+/* Every full cell of map `light`: a fine grid, while the map's fine_grids last, its fine cells
+ * emptied and its slots' triangles listed in lb_pairs; then its number in the cell's first
+ * slot, which a full cell's query does not read as a triangle (-1: none). */
 __kernel void light_buffer_fine(__global const LightBuffer* restrict lb_maps, const uint light,
-                                __global int2* restrict lb_cells, __global int* restrict lb_slots)
+                                __global int2* restrict lb_cells, __global int* restrict lb_slots,
+                                __global int2* restrict lb_pairs)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
@@ -189,11 +187,38 @@ __kernel void light_buffer_fine(__global const LightBuffer* restrict lb_maps, co
     for (int c = get_global_id(0); c < n; c += get_global_size(0)) {
         const int cell = m.cell_base + c;
         if (lb_cells[cell].x <= LB_SLOTS) continue;
-        const int g = atomic_inc(cells + 2 * m.outside_cell + 1);
-        lb_slots[cell * LB_SLOTS] = g < m.fine_grids ? g : -1;
-        if (g < m.fine_grids)
+        const int g = atomic_inc(cells + 2 * m.fine_cell);
+        if (g < m.fine_grids) {
             for (int f = 0; f < LB_FINE_CELLS; ++f)
                 lb_cells[m.fine_base + g * LB_FINE_CELLS + f] = (int2)(0);
+            const int p = atomic_add(cells + 2 * m.fine_cell + 1, LB_SLOTS);
+            for (int k = 0; k < LB_SLOTS && p + k < m.fine_pairs; ++k)
+                lb_pairs[p + k] = (int2)(lb_slots[cell * LB_SLOTS + k], cell);
+        }
+        lb_slots[cell * LB_SLOTS] = g < m.fine_grids ? g : -1;
+    }
+}
+
+/* The pairs' triangles in their full cells' fine grids: work-item r of a pair takes row r. */
+__kernel void light_buffer_fine_raster(__global const LightBuffer* restrict lb_maps,
+                                       const uint light, __global const float4* restrict lb_tris,
+                                       __global const Transform* restrict xforms,
+                                       __global int2* restrict lb_cells,
+                                       __global int* restrict lb_slots,
+                                       __global const int2* restrict lb_pairs)
+{
+    const LightBuffer m = lb_maps[light];
+    __global int* cells = (__global int*)lb_cells;
+    const int listed = lb_cells[m.fine_cell].y;
+    if (listed > m.fine_pairs) return;   /* some were left out: no grid is read */
+    for (int q = get_global_id(0); q < listed * LB_FINE; q += get_global_size(0)) {
+        const int2 pair = lb_pairs[q / LB_FINE];
+        const int g = lb_slots[pair.y * LB_SLOTS];
+        if (g < 0) continue;
+        const LbTriangle o = lb_project(&m, lb_tris, xforms, (uint)pair.x, cells, false);
+        const int c = pair.y - m.cell_base;
+        lb_insert_fine_row(&m, &o, (uint)pair.x, c % m.n_u, c / m.n_u, g, q % LB_FINE, cells,
+                           lb_slots);
     }
 }
 
@@ -204,7 +229,8 @@ __kernel void light_buffer_raster_big(__global const LightBuffer* restrict lb_ma
                                       const uint n_tris, __global const Transform* restrict xforms,
                                       __global int2* restrict lb_cells,
                                       __global int* restrict lb_slots,
-                                      __global const uint* restrict lb_big, const uint fine)
+                                      __global const uint* restrict lb_big,
+                                      __global int2* restrict lb_pairs)
 {
     const LightBuffer m = lb_maps[light];
     __global int* cells = (__global int*)lb_cells;
@@ -214,13 +240,13 @@ __kernel void light_buffer_raster_big(__global const LightBuffer* restrict lb_ma
         const uint t = lb_big[n_tris - 1u - (uint)b];
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, false);
         for (int k = get_global_id(0); k < o.n; k += get_global_size(0))
-            lb_insert(&m, &o, t, k, cells, lb_slots, fine);
+            lb_insert(&m, &o, t, k, cells, lb_slots, lb_pairs);
     }
     for (int b = get_group_id(0); b < n_big.x; b += get_num_groups(0)) {   /* uniform */
         const uint t = lb_big[b];
         const LbTriangle o = lb_project(&m, lb_tris, xforms, t, cells, false);
         for (int k = get_local_id(0); k < o.n; k += get_local_size(0))
-            lb_insert(&m, &o, t, k, cells, lb_slots, fine);
+            lb_insert(&m, &o, t, k, cells, lb_slots, lb_pairs);
     }
 }
 

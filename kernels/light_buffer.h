@@ -41,8 +41,7 @@ typedef struct {
     float4 toward;     /* xyz: unit direction toward the light (its direction negated) */
     int n_u, n_v;      /* cells along u and v */
     int cell_base;     /* the map's first cell in lb_cells (its slots: LB_SLOTS per cell) */
-    int outside_cell;  /* lb_cells[outside_cell].x: triangles that reach off the map; .y: fine
-                          grids handed out (light_buffer_fine) */
+    int outside_cell;  /* lb_cells[outside_cell].x: triangles that reach off the map */
     int big_cell;      /* lb_cells[big_cell]: triangles left to light_buffer_raster_big (x:
                           medium, y: huge; light_buffer.cl) */
     float margin;      /* cells a triangle's footprint grows by: rounding of the projections */
@@ -50,13 +49,17 @@ typedef struct {
     int fine_base;     /* the map's first fine cell in lb_cells (grid g's: fine_base +
                           g LB_FINE_CELLS + row LB_FINE + column, their slots as a cell's) */
     int fine_grids;    /* fine grids the map has room for */
-    int pad[3];
+    int fine_cell;     /* lb_cells[fine_cell]: x: fine grids handed out, y: (triangle, full
+                          cell) pairs listed for them (light_buffer.cl) */
+    int fine_pairs;    /* pairs the list has room for; past them no fine grid is read */
+    int pad;
 } LightBuffer;
 
 /* The kernel parameters of a stage that reads the light buffer (shadow rays), and their names.
  * lb_cells[c]: x = triangles listed (the first LB_SLOTS in lb_slots[c * LB_SLOTS ..]),
  * y = float_to_ordered of the nearest-to-the-light depth any of them reaches over the cell (a
- * fine cell's: none); a full cell's first slot holds its fine grid (-1: none, the grids ran out);
+ * fine cell's: none); a full cell's first slot holds its fine grid (-1: none, the grids ran out),
+ * read only while the pairs that filled the grids fit their list;
  * lb_tris: three float4 per listed triangle, its object-space vertices, p0.w = as_float(instance).
  */
 #define LIGHT_BUFFER_PARAMS                                                                   \
@@ -119,7 +122,7 @@ inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* re
     int listed = cell, n = c.x;
     if (n > LB_SLOTS) {   /* its fine cell's list, where it has a fine grid */
         const int g = lb_slots[cell * LB_SLOTS];
-        if (g >= 0) {
+        if (g >= 0 && lb_cells[m.fine_cell].y <= m.fine_pairs) {
             /* cu - floor(cu) is exact (Sterbenz), and so is its product by LB_FINE */
             const int fu = min((int)((cu - floor(cu)) * LB_FINE), LB_FINE - 1);
             const int fv = min((int)((cv - floor(cv)) * LB_FINE), LB_FINE - 1);

@@ -16,9 +16,10 @@ Per build (:meth:`LightBuffer.enqueue`, when the transform rows were written sin
 ``light_buffer_clear`` over every map's cells, then per map ``light_buffer_raster`` (a work-item
 per triangle, moved by its instance's live transform row: a boat that a device stage moves is
 followed with no host copy) and ``light_buffer_raster_big`` (the triangles over more than 32
-cells: a work-group each, or the whole launch for those over 4096), ``light_buffer_fine`` (the
-full cells' grids handed out), and the two raster kernels again, listing the full cells'
-triangles in their fine cells.
+cells: a work-group each, or the whole launch for those over 4096), both listing the (triangle,
+cell) pairs past a cell's slots, then ``light_buffer_fine`` (the full cells' grids handed out,
+their slots' triangles added to the pairs) and ``light_buffer_fine_raster`` (each pair's triangle
+in its cell's fine cells, a work-item per pair and fine row).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ LIGHT_BUFFER = np.dtype([("u", _F4), ("v", _F4), ("toward", _F4), ("n_u", np.int
                          ("n_v", np.int32), ("cell_base", np.int32), ("outside_cell", np.int32),
                          ("big_cell", np.int32), ("margin", np.float32),
                          ("depth_slack", np.float32), ("fine_base", np.int32),
-                         ("fine_grids", np.int32), ("pad", np.int32, 3)])
+                         ("fine_grids", np.int32), ("fine_cell", np.int32),
+                         ("fine_pairs", np.int32), ("pad", np.int32)])
 LB_SLOTS = 16           #: kernels/light_buffer.h
 LB_FINE = 8             #: kernels/light_buffer.h: a fine grid's cells along each side
 #: Most cells along a map's side.
@@ -49,6 +51,13 @@ DOMAIN_PAD = 0.1
 _MAX_ITEMS = 1 << 20
 
 
+#: (triangle, full cell) pairs a map's list has room for, per fine grid: the grid's LB_SLOTS and
+#: as many again past them on average (the baseline scene's 1,431 full cells: 48,360 pairs).
+PAIRS_PER_GRID = 3 * LB_SLOTS
+#: Most work-items light_buffer_fine_raster starts (they stride over the pairs' rows).
+_MAX_FINE_ITEMS = 1 << 18
+
+
 def fine_grids_for(map_cells: int) -> int:
     """Fine grids a map of ``map_cells`` cells has room for: one per 256 cells (3,072 at the
     baseline scene's 1024 x 768, which fills 1,431; 4.5 KiB a grid), at least 16."""
@@ -59,14 +68,15 @@ class LightBuffer:
     """The maps of one renderer: ``cells`` along a map's longer side (0: none)."""
 
     def __init__(self, rt: Runtime, cells: int, stage: str = "render.light_buffer",
-                 fine_grids: int | None = None):
+                 fine_grids: int | None = None, pairs_per_grid: int = PAIRS_PER_GRID):
         # checked with the settings (RenderSettings.resolved: [0, MAX_CELLS])
         self.rt, self.cells, self.stage = rt, int(cells), stage
-        #: fine grids per map (None: :func:`fine_grids_for` its cells; tests and studies)
-        self.fine_grids = fine_grids
+        #: fine grids per map (None: :func:`fine_grids_for` its cells) and room for the pairs
+        #: that fill them per grid (tests and studies)
+        self.fine_grids, self.pairs_per_grid = fine_grids, int(pairs_per_grid)
         self.maps = np.zeros(MAX_LIGHTS, LIGHT_BUFFER)
         self.n_tris = 0
-        self.n_cells = 0               #: cells of every map, then two counters per map
+        self.n_cells = 0               #: cells of every map, then three counters per map
         self.n_map_cells = 0           #: cells of every map
         self.n_fine_cells = 0          #: the maps' fine grids' cells, after n_cells
         self.reason = "not planned"    #: why no light has a map ("" when one has)
@@ -85,7 +95,8 @@ class LightBuffer:
                 self.rt.kernel_launcher("light_buffer.cl", f"light_buffer_{name}",
                                         stage=f"{self.stage}.{stage}")
                 for name, stage in (("clear", "clear"), ("raster", "raster"),
-                                    ("raster_big", "big"), ("fine", "fine")))
+                                    ("raster_big", "big"), ("fine", "fine"),
+                                    ("fine_raster", "fine")))
         return self._kernels
 
     def _alloc(self, tris: np.ndarray, n_cells: int) -> None:
@@ -95,6 +106,7 @@ class LightBuffer:
         self.tris_buf = rt.to_device(tris)
         self.cells_buf = rt.buffer(8 * max(n_cells, 1))
         self.slots_buf = rt.buffer(4 * LB_SLOTS * max(n_cells, 1))
+        self.pairs_buf = rt.buffer(8 * max(int(self.maps["fine_pairs"].max()), 1))
         self.big_buf = rt.buffer(4 * max(len(tris) // 3, 1))   # light_buffer_raster_big's list
 
     @property
@@ -135,9 +147,10 @@ class LightBuffer:
                 n_cells = self._plan_map(i, -lights[i]["direction"][:3], world, n_cells)
             self.n_map_cells = n_cells
             for k, i in enumerate(directional):   # their counters after every map's cells
-                self.maps[i]["outside_cell"] = n_cells + 2 * k
-                self.maps[i]["big_cell"] = n_cells + 2 * k + 1
-            n_cells += 2 * len(directional)
+                self.maps[i]["outside_cell"] = n_cells + 3 * k
+                self.maps[i]["big_cell"] = n_cells + 3 * k + 1
+                self.maps[i]["fine_cell"] = n_cells + 3 * k + 2
+            n_cells += 3 * len(directional)
         self.n_tris = 0 if self.reason else len(tris) // 3
         self.n_cells, n_fine = n_cells, 0
         for i in directional if not self.reason else ():   # their fine grids after the counters
@@ -145,6 +158,7 @@ class LightBuffer:
             grids = (fine_grids_for(int(m["n_u"] * m["n_v"])) if self.fine_grids is None
                      else int(self.fine_grids))
             m["fine_base"], m["fine_grids"] = n_cells + n_fine, grids
+            m["fine_pairs"] = grids * self.pairs_per_grid
             n_fine += grids * LB_FINE * LB_FINE
         self.n_fine_cells = n_fine
         self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells + n_fine)
@@ -228,27 +242,28 @@ class LightBuffer:
             return False
         self._built = key
         self.builds += 1
-        clear, raster, raster_big, fine = self._launchers()
+        clear, raster, raster_big, fine, fine_raster = self._launchers()
         clear.bind(lb_cells=self.cells_buf, n_cells=self.n_cells, n_map_cells=self.n_map_cells)
         clear.launch(self.n_cells, 256)
         if self.n_tris == 0:
             return True
-        bufs = {"lb_maps": self.maps_buf, "lb_tris": self.tris_buf, "xforms": transform_buffer,
-                "lb_cells": self.cells_buf, "lb_slots": self.slots_buf, "lb_big": self.big_buf}
-        raster.bind(**bufs, n_tris=self.n_tris)
-        raster_big.bind(**bufs, n_tris=self.n_tris)
-        fine.bind(lb_maps=self.maps_buf, lb_cells=self.cells_buf, lb_slots=self.slots_buf)
+        cells = {"lb_maps": self.maps_buf, "lb_cells": self.cells_buf, "lb_slots": self.slots_buf,
+                 "lb_pairs": self.pairs_buf}
+        tris = {"lb_tris": self.tris_buf, "xforms": transform_buffer}
+        raster.bind(**cells, **tris, lb_big=self.big_buf, n_tris=self.n_tris)
+        raster_big.bind(**cells, **tris, lb_big=self.big_buf, n_tris=self.n_tris)
+        fine.bind(**cells)
+        fine_raster.bind(**cells, **tris)
         items = min(self.n_tris, _MAX_ITEMS)
         for light in np.flatnonzero(self.maps["n_u"] > 0):
             m = self.maps[light]
-            for second in (0, 1):   # the cells, then the full cells' fine grids
-                if second:
-                    fine.bind(light=int(light))
-                    fine.launch(-(-int(m["n_u"] * m["n_v"]) // 256) * 256, 256)
-                raster.bind(light=int(light), fine=second)
-                raster.launch(-(-items // 64) * 64, 64)
-                raster_big.bind(light=int(light), fine=second)
-                raster_big.launch(self._big_items, 256)
+            for k in (raster, raster_big, fine, fine_raster):
+                k.bind(light=int(light))
+            raster.launch(-(-items // 64) * 64, 64)
+            raster_big.launch(self._big_items, 256)
+            fine.launch(-(-int(m["n_u"] * m["n_v"]) // 256) * 256, 256)
+            rows = min(int(m["fine_pairs"]) * LB_FINE, _MAX_FINE_ITEMS)
+            fine_raster.launch(-(-rows // 256) * 256, 256)
         return True
 
     def read(self, light: int) -> dict:
@@ -256,7 +271,8 @@ class LightBuffer:
         and ``depth`` (n_v, n_u), ``slots`` (n_v, n_u, LB_SLOTS), ``outside`` (triangles that
         reached off the map), ``big`` (those left to light_buffer_raster_big), ``grid`` (n_v,
         n_u: each full cell's fine grid, -1 none or not full), ``fine_grids`` (grids the full
-        cells asked for, handed out or not), and the grids' ``fine_count`` (grids, LB_FINE,
+        cells asked for, handed out or not), ``fine_pairs`` (the pairs listed for them: past the
+        map's ``fine_pairs`` no grid is read), and the grids' ``fine_count`` (grids, LB_FINE,
         LB_FINE) and ``fine_slots`` (grids, LB_FINE, LB_FINE, LB_SLOTS)."""
         m = self.maps[light]
         if m["n_u"] == 0:
@@ -264,12 +280,12 @@ class LightBuffer:
         n = int(m["n_u"] * m["n_v"])
         base = int(m["cell_base"])
         cells = self.rt.to_host(self.cells_buf, np.int32, 2 * n, 2 * base).reshape(-1, 2)
-        counters = self.rt.to_host(self.cells_buf, np.int32, 4, 2 * int(m["outside_cell"]))
+        counters = self.rt.to_host(self.cells_buf, np.int32, 6, 2 * int(m["outside_cell"]))
         slots = self.rt.to_host(self.slots_buf, np.int32, LB_SLOTS * n, LB_SLOTS * base)
         shape = (int(m["n_v"]), int(m["n_u"]))
         count = cells[:n, 0].reshape(shape)
         slots = slots.reshape(*shape, LB_SLOTS)
-        asked = int(counters[1])
+        asked = int(counters[4])
         g, fb = min(asked, int(m["fine_grids"])), int(m["fine_base"])
         per = LB_FINE * LB_FINE
         fine = self.rt.to_host(self.cells_buf, np.int32, 2 * max(g * per, 1), 2 * fb)
@@ -279,6 +295,7 @@ class LightBuffer:
                 "slots": slots, "outside": int(counters[0]),
                 "big": int(counters[2] + counters[3]),
                 "grid": np.where(count > LB_SLOTS, slots[..., 0], -1), "fine_grids": asked,
+                "fine_pairs": int(counters[5]),
                 "fine_count": fine[0:2 * g * per:2].reshape(g, LB_FINE, LB_FINE),
                 "fine_slots": fslots[:LB_SLOTS * g * per].reshape(g, LB_FINE, LB_FINE,
                                                                    LB_SLOTS)}

@@ -11,7 +11,7 @@ import pyopencl as cl
 import pytest
 
 from kernels.layout import check_struct
-from raytrace.light_buffer import LB_FINE, LB_SLOTS, LIGHT_BUFFER, LightBuffer
+from raytrace.light_buffer import LB_FINE, LB_SLOTS, LIGHT_BUFFER, PAIRS_PER_GRID, LightBuffer
 from raytrace.render import Renderer, RenderSettings
 from raytrace.render_scene import Material, RenderScene
 from raytrace.render_types import MASK_OPAQUE
@@ -269,17 +269,18 @@ def test_answers_are_the_bvh_any_hit(rt, cells):
     assert np.array_equal(got[sure, 0] == 1, blocked[sure])
 
 
-@pytest.mark.parametrize("grids", [None, 1])
-def test_counters_say_how_each_query_was_answered(rt, grids):
+@pytest.mark.parametrize("grids,pairs", [(None, PAIRS_PER_GRID), (1, 1000), (None, 1)])
+def test_counters_say_how_each_query_was_answered(rt, grids, pairs):
     """TRACE_COUNT builds count the map's answers by kind (Scene.trace_counts()
     ["light_buffer"]): they add up to the queries and agree with the answers given, with a
     float64 look-up of the origins' cells, and with the triangles the listed cells hold. The
-    full cells' origins look in their fine grids (grids=1: one grid, the others' walk)."""
+    full cells' origins look in their fine grids (grids=1: one grid, the others' walk; pairs=1:
+    the pairs that fill the grids overflow their list, so none is read)."""
     from kernels.runtime import Runtime
 
     counting = Runtime(rt.device, defines={"TRACE_COUNT": 1})
     sc = clutter(counting)
-    lb = built(counting, sc, 6, fine_grids=grids)   # coarse: full cells too
+    lb = built(counting, sc, 6, fine_grids=grids, pairs_per_grid=pairs)   # full cells too
     rng = np.random.default_rng(5)
     n = 4000
     org = rng.uniform((-2.2, 0.0, -2.2), (2.2, 1.4, 2.2), (n, 3)).astype(np.float32)
@@ -306,6 +307,10 @@ def test_counters_say_how_each_query_was_answered(rt, grids):
     # cell, they walk
     grid = np.full(n, -1)
     grid[on] = cells["grid"][cv[on].astype(int), cu[on].astype(int)]
+    overflow = cells["fine_pairs"] > lb.maps[0]["fine_pairs"]
+    assert overflow == (pairs == 1)
+    if overflow:
+        grid[:] = -1   # no grid is read
     full = on & (count > LB_SLOTS)
     assert full.sum() > 0.05 * n
     assert abs(c["fine"] - (full & (grid >= 0)).sum()) <= 0.01 * n
@@ -316,7 +321,9 @@ def test_counters_say_how_each_query_was_answered(rt, grids):
     fine[in_grid] = cells["fine_count"][grid[in_grid], fv[in_grid], fu[in_grid]]
     left = full & ((grid < 0) | (fine > LB_SLOTS))
     assert abs(c["full"] - left.sum()) <= 0.01 * n
-    if grids is None:   # room for every full cell: the fine cells answer most
+    if overflow:
+        assert c["fine"] == 0 and c["full"] > 0.02 * n
+    elif grids is None:   # room for every full cell: the fine cells answer most
         assert cells["fine_grids"] == (cells["count"] > LB_SLOTS).sum() <= lb.maps[0]["fine_grids"]
         assert c["full"] < 0.1 * c["fine"]
     else:
