@@ -27,6 +27,10 @@
 #   the tree has them), and on copies of the tree with no fallback walk (nofallback, wrong
 #   images) or with the walk's code compiled in but never run (neverwalk: a condition the
 #   compiler cannot see through, prm->n_lights > 1000; wrong images).
+# PART ordered: bench/shadow_lean_probe.py's render_shadow_ordered(_binned) (the renderer's own
+#   shadow kernels over the hits whose shadow rays start in a full light-buffer cell first,
+#   flagged by render_shadow_classify) against render_shadow(_binned), twice, at 1920x1080, and
+#   at 3840x2160 once; with -cl-nv-verbose for the kernels' registers.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -119,6 +123,15 @@ order)
     probe_in /tmp/nofallback nofallback
     probe_in /tmp/nofallback nofallback_first --full-first
     probe_in /tmp/neverwalk neverwalk
+    ;;
+ordered)
+    a="--scene bench/scenes/pool_static_boat.toml --cells 1024 --repeats 20"
+    for rep in 1 2; do
+        LBWATER_CL_OPTIONS=-cl-nv-verbose timeout 150 python3 bench/shadow_lean_probe.py $a \
+            --size 1920 1080 --json "$out/ordered_$rep.json" | tail -2
+    done
+    timeout 200 python3 bench/shadow_lean_probe.py $a --size 3840 2160 \
+        --json "$out/ordered_4k.json" | tail -2
     ;;
 *)
     echo "unknown PART $part" >&2

@@ -76,6 +76,23 @@ class LeanShadowProbe:
         self.lean.bind(**scene, **common, **r.light_buffer.bindings(), list=self.list,
                        list_counts=self.list_counts, capacity=self.capacity,
                        radiance=self.radiance)
+        # the renderer's shadow kernels over the hits of full light-buffer cells first
+        self.first_flags = rt.buffer(self.capacity)
+        self.first_list = rt.buffer(4 * self.capacity)
+        self.first_count = rt.buffer(4)
+        first = {"first_flags": self.first_flags, "first_list": self.first_list,
+                 "first_count": self.first_count}
+        level = {"rays": r.rays[depth % 2], "hits": r.hits[depth % 2], "counts": r.counts,
+                 "depth": depth, "cprm": r.caustic_params, **r.light_buffer.bindings()}
+        self.classify = rt.kernel_launcher("render_shadow_lean_probe.cl",
+                                           "render_shadow_classify", stage="probe.classify")
+        self.classify.bind(**common, **level, **first)
+        self.ordered = {}
+        for name in ("render_shadow_ordered", "render_shadow_ordered_binned"):
+            k = rt.kernel_launcher("render_shadow_lean_probe.cl", name, stage="probe.ordered")
+            k.bind(**scene, **common, **level, **first, lights=r.scene.light_buf,
+                   radiance=self.radiance, caustic_map=r.caustic_map)
+            self.ordered[name.endswith("binned")] = k
 
     def _size(self, n: int, local: int) -> tuple:
         return (-(-max(n, 1) // local) * local,)
@@ -104,6 +121,19 @@ class LeanShadowProbe:
         e2 = self.lean.launch(self._size(int(counts.sum()), self.local), (self.local,))
         return e1, e2, int(counts[0]), int(counts[1])
 
+    def run_ordered(self, binned: bool = False) -> tuple:
+        """(classify event, ordered shadow event, hits taken first)."""
+        import pyopencl as cl
+
+        from raytrace.render import BIN_WG
+
+        cl.enqueue_fill_buffer(self.rt.queue, self.first_count, np.uint32(0), 0, 4)
+        e1 = self.classify.launch(self._size(self.n, self.local), (self.local,))
+        n_first = int(self.rt.to_host(self.first_count, np.uint32, 1)[0])
+        local = BIN_WG if binned else self.local
+        e2 = self.ordered[binned].launch(self._size(self.n + n_first, local), (local,))
+        return e1, e2, n_first
+
     def radiance_now(self) -> np.ndarray:
         return self.rt.to_host(self.radiance, np.float32, self.size // 4).reshape(-1, 4)
 
@@ -118,8 +148,14 @@ def compare(probe: LeanShadowProbe) -> dict:
     got = probe.radiance_now()[: probe.n]
     probe.restore()
     scale = max(float(np.abs(want).max()), 1e-30)
+    ordered = {}
+    for binned in (False, True):
+        *_, n_first = probe.run_ordered(binned)
+        ordered[binned] = probe.radiance_now()[: probe.n]
+        probe.restore()
     return {"max_abs_diff": float(np.abs(got - want).max()), "radiance_max": scale,
-            "list_crossing": n_cross, "list_other": n_other}
+            "list_crossing": n_cross, "list_other": n_other, "first_hits": n_first,
+            "ordered_equal": all(np.array_equal(v, want) for v in ordered.values())}
 
 
 def time_level(probe: LeanShadowProbe, repeats: int) -> dict:
@@ -130,6 +166,8 @@ def time_level(probe: LeanShadowProbe, repeats: int) -> dict:
         if probe.shadow_binned is not None:
             evts["shadow_binned"] = probe.run_production(binned=True)
         evts["emit"], evts["lean"], *_ = probe.run_lean()
+        evts["classify"], evts["ordered"], _ = probe.run_ordered()
+        _, evts["ordered_binned"], _ = probe.run_ordered(binned=True)
         if probe.trace is not None:
             evts["primary_trace"] = probe.trace.launch(probe._size(probe.n, probe.local),
                                                        (probe.local,))
@@ -203,9 +241,13 @@ def measure(args) -> int:
         if level["max_abs_diff"] > 1e-4 * level["radiance_max"]:
             raise RuntimeError(f"level {depth}: the two launches' radiance differs from "
                                f"render_shadow's by {level['max_abs_diff']:.3g}")
+        if not level["ordered_equal"]:
+            raise RuntimeError(f"level {depth}: the ordered shadow kernels' radiance differs "
+                               "from render_shadow's")
         result["levels"].append(level)
         print(f"level {depth}: {probe.n} hits, list {level['list_full_first']} full-cell first + "
-              f"{level['list_crossing']} crossing + {level['list_other']} other; " + ", ".join(
+              f"{level['list_crossing']} crossing + {level['list_other']} other, "
+              f"{level['first_hits']} hits first; " + ", ".join(
                   f"{k[:-3]} {v:.4f}" for k, v in level.items() if k.endswith("_ms")) + " ms",
               flush=True)
     result["registers"] = kernel_registers(world.rt)

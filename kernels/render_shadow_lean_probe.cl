@@ -16,6 +16,7 @@
  * than LB_SLOTS triangles: a fine grid's cells or a BVH walk answer them) go first, in a list of
  * their own (list_counts[2], from list[capacity]), so that the costliest start first. */
 #include "common.h"
+#include "render_bins.h"
 #include "render_shadow.h"
 
 #ifndef LEAN_FULL_FIRST
@@ -100,5 +101,88 @@ __kernel void render_shadow_lean(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_
                                               LIGHT_BUFFER_ARGS, prm, 0u, ray_org(&s),
                                               ray_dir(&s), as_float(s.sample), s.medium);
         if (max3(T) > 0.0f) radiance[s.pixel] += (float4)(T * ray_weight(&s), 0.0f);
+    }
+}
+
+/* The same question for the renderer's own shadow kernels: would they gain from taking the hits
+ * whose shadow rays start in a full light-buffer cell first? render_shadow_classify flags them
+ * (first_flags[i], and their indices in first_list); render_shadow_ordered and
+ * render_shadow_ordered_binned are render_shadow and render_shadow_binned over the list first,
+ * then the other hits in order. Which work-item takes a hit never changes its radiance. */
+__kernel void render_shadow_classify(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                                     __global const Ray* restrict rays,
+                                     __global const Hit* restrict hits,
+                                     __global const uint* counts, const uint depth,
+                                     const CausticParams cprm, LIGHT_BUFFER_PARAMS,
+                                     __global uchar* restrict first_flags,
+                                     __global uint* restrict first_list,
+                                     __global uint* restrict first_count)
+{
+    const uint n = counts[depth];
+    for (uint i = get_global_id(0); i < n; i += get_global_size(0)) {
+        ShadowSite o;
+        bool full = false;
+        if (shadow_site(RENDER_GEOM_ARGS, prm, rays, hits, i, &cprm, &o))
+            for (uint l = 0; l < prm->n_lights; l++)
+                full |= light_buffer_full(LIGHT_BUFFER_ARGS, l, o.org);
+        first_flags[i] = full ? 1 : 0;
+        if (full) first_list[atomic_inc(first_count)] = i;
+    }
+}
+
+/* Entry j of the ordered launch: first_list's hits, then the others (n: none, a flagged one) */
+inline uint ordered_hit(const uint j, const uint n, const uint n_first,
+                        __global const uchar* restrict first_flags,
+                        __global const uint* restrict first_list)
+{
+    if (j < n_first) return first_list[j];
+    if (j >= n_first + n || first_flags[j - n_first]) return n;
+    return j - n_first;
+}
+
+__kernel void render_shadow_ordered(SCENE_PARAMS, RENDER_GEOM_PARAMS,
+                                    __constant const RenderParams* prm,
+                                    __global const Light* restrict lights,
+                                    __global const Ray* restrict rays,
+                                    __global const Hit* restrict hits,
+                                    __global const uint* counts, const uint depth,
+                                    __global float4* restrict radiance,
+                                    __global const float4* restrict caustic_map,
+                                    const CausticParams cprm, LIGHT_BUFFER_PARAMS,
+                                    __global const uchar* restrict first_flags,
+                                    __global const uint* restrict first_list,
+                                    __global const uint* restrict first_count)
+{
+    const uint n = counts[depth], n_first = *first_count;
+    for (uint j = get_global_id(0); j < n_first + n; j += get_global_size(0)) {
+        const uint i = ordered_hit(j, n, n_first, first_flags, first_list);
+        if (i < n)
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays,
+                       hits, i, radiance, caustic_map, &cprm);
+    }
+}
+
+__kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void
+render_shadow_ordered_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                             __global const Light* restrict lights,
+                             __global const Ray* restrict rays, __global const Hit* restrict hits,
+                             __global const uint* counts, const uint depth,
+                             __global float4* restrict radiance,
+                             __global const float4* restrict caustic_map,
+                             const CausticParams cprm, LIGHT_BUFFER_PARAMS,
+                             __global const uchar* restrict first_flags,
+                             __global const uint* restrict first_list,
+                             __global const uint* restrict first_count)
+{
+    __local RenderBins bins;
+    const uint n = counts[depth], n_first = *first_count;
+    for (uint base = get_group_id(0) * RENDER_BIN_WG; base < n_first + n;
+         base += get_num_groups(0) * RENDER_BIN_WG) {   /* uniform over the work-group */
+        const uint e = ordered_hit(base + get_local_id(0), n, n_first, first_flags, first_list);
+        const uint cls = e < n ? shadow_cost_class(prm, rays, hits, e, &cprm) : RENDER_BIN_IDLE;
+        const uint i = bin_round(&bins, e, cls);
+        if (i < n)
+            shadow_ray(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays,
+                       hits, i, radiance, caustic_map, &cprm);
     }
 }

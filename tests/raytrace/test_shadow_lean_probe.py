@@ -61,3 +61,22 @@ def test_list_holds_the_traced_rays(rt):
     assert len(np.unique(front["pixel"])) == n_cross   # one entry per hit (one light)
     back = lst[probe.capacity - n_other:]
     assert np.all(back["medium"] < 0)
+
+
+@pytest.mark.parametrize("depth", [0, 1])
+def test_hits_of_full_cells_first_give_render_shadow_s_radiance(rt, depth):
+    """With a coarse light buffer (full cells under the boat), the renderer's shadow kernels
+    over the hits of full cells first (render_shadow_ordered, _binned) write render_shadow's
+    radiance exactly; the list holds each flagged hit once, the flags no other."""
+    w = World(STATIC, rt, width=64, height=48, cells=64, bounces=1, light_buffer=24)
+    w.frame(1 / 60)
+    rt.queue.finish()
+    probe = LeanShadowProbe(w, depth)
+    res = compare(probe)
+    assert res["ordered_equal"] and res["radiance_max"] > 0
+    assert 0 < res["first_hits"] < probe.n
+    probe.run_ordered()
+    flags = rt.to_host(probe.first_flags, np.uint8, probe.n)
+    first = rt.to_host(probe.first_list, np.uint32, res["first_hits"])
+    probe.restore()
+    assert sorted(first.tolist()) == np.flatnonzero(flags).tolist()
