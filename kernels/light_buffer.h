@@ -22,8 +22,8 @@
 /* one over more cells by the whole launch */
 #define LB_MEDIUM_CELLS 4096
 /* a full cell's fine grid: LB_FINE x LB_FINE cells (on the baseline scene's map of 1024 cells,
-   the queries that walk the BVH go from 1,005 to 42 of 99,133: BENCHMARKS.md, thirteenth
-   session) */
+   the queries that walk the BVH go from 1,005 to 63 of 99,133 in PoCL's counts: BENCHMARKS.md,
+   thirteenth session) */
 #define LB_FINE 8
 #define LB_FINE_CELLS (LB_FINE * LB_FINE)
 /* light_buffer_blocked's answers */
