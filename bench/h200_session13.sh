@@ -31,6 +31,13 @@
 #   shadow kernels over the hits whose shadow rays start in a full light-buffer cell first,
 #   flagged by render_shadow_classify) against render_shadow(_binned), twice, at 1920x1080, and
 #   at 3840x2160 once; with -cl-nv-verbose for the kernels' registers.
+# Each PART ran on the tree of the commit its results are named by (bench/results/
+# h200-2026-12-04-s13/PART_COMMIT.json): regs and lean on eadbbbb (any tree since); fine on
+# ed5c32a (fine grids by a second raster pass) and on cf5f4c2 (from a pair list); leanfine and
+# order on ed5c32a, with $OLD holding eadbbbb's tree plus ed5c32a's probe
+# (bench/shadow_lean_probe.py, kernels/render_shadow_lean_probe.cl) and its light_buffer_full
+# (kernels/light_buffer.h) copied in, so that --full-first runs there; ordered on 6e5b647 or
+# later.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
