@@ -7,8 +7,8 @@
  * triangles (under a boat's rigging) has a fine grid of LB_FINE x LB_FINE cells of its own,
  * each listing the triangles that meet it, while the map's fine grids last. A fine cell that
  * lists more too, or an origin off the map while some triangle reached past it, says "unknown"
- * and the ray walks the BVH as before. Built on the device from the scene's transform rows whenever
- * they were written (light_buffer.cl); raytrace/light_buffer.py plans it. */
+ * and the ray walks the BVH as before. Built on the device from the scene's transform rows
+ * whenever they were written (light_buffer.cl); raytrace/light_buffer.py plans it. */
 #ifndef LBWATER_LIGHT_BUFFER_H
 #define LBWATER_LIGHT_BUFFER_H
 

@@ -4,8 +4,8 @@ map, where each map lies, the triangles it lists, and the per-frame build.
 A shadow ray toward a directional light can only be blocked by the opaque triangles whose
 shadow falls where its origin does. The map lists them per cell; the shadow kernels test those
 few (the traversal's own triangle test, so the answer is the BVH's, bit for bit) instead of
-walking the TLAS and BLASes, and fall back to the walk where a cell lists more than ``LB_SLOTS``.
-What it covers: the instances the shadow rays' any-hit query sees (the opaque ones when the
+walking the TLAS and BLASes, and fall back to the walk where a cell, and its fine cell (below),
+list more than ``LB_SLOTS``. What it covers: the instances the shadow rays' any-hit query sees (the opaque ones when the
 scene has a dielectric, else all), when each is a mesh the host holds; none otherwise (a height
 field, a mesh given as device buffers), and no spot light (their rays walk the BVH as before).
 A cell that lists more (a boat's rigging, whose tiny triangles stack along the light) gets a
@@ -52,15 +52,16 @@ _MAX_ITEMS = 1 << 20
 
 
 #: (triangle, full cell) pairs a map's list has room for, per fine grid: the grid's LB_SLOTS and
-#: as many again past them on average (the baseline scene's 1,431 full cells: 48,360 pairs).
+#: twice as many again past them on average (the baseline scene's 1,431 full cells at 1024
+#: cells: 48,138 pairs, against room for 129,984).
 PAIRS_PER_GRID = 3 * LB_SLOTS
 #: Most work-items light_buffer_fine_raster starts (they stride over the pairs' rows).
 _MAX_FINE_ITEMS = 1 << 18
 
 
 def fine_grids_for(map_cells: int) -> int:
-    """Fine grids a map of ``map_cells`` cells has room for: one per 256 cells (3,072 at the
-    baseline scene's 1024 x 768, which fills 1,431; 4.5 KiB a grid), at least 16."""
+    """Fine grids a map of ``map_cells`` cells has room for: one per 256 cells (2,708 for the
+    baseline scene's map of 1024 x 677, which fills 1,431; 4.5 KiB a grid), at least 16."""
     return max(16, map_cells // 256)
 
 
