@@ -5,9 +5,10 @@ A shadow ray toward a directional light can only be blocked by the opaque triang
 shadow falls where its origin does. The map lists them per cell; the shadow kernels test those
 few (the traversal's own triangle test, so the answer is the BVH's, bit for bit) instead of
 walking the TLAS and BLASes, and fall back to the walk where a cell, and its fine cell (below),
-list more than ``LB_SLOTS``. What it covers: the instances the shadow rays' any-hit query sees (the opaque ones when the
-scene has a dielectric, else all), when each is a mesh the host holds; none otherwise (a height
-field, a mesh given as device buffers), and no spot light (their rays walk the BVH as before).
+list more than ``LB_SLOTS``. What it covers: the instances the shadow rays' any-hit query sees
+(the opaque ones when the scene has a dielectric, else all), when each is a mesh the host holds;
+none otherwise (a height field, a mesh given as device buffers), and no spot light (their rays
+walk the BVH as before).
 A cell that lists more (a boat's rigging, whose tiny triangles stack along the light) gets a
 fine grid of ``LB_FINE`` x ``LB_FINE`` cells of its own while the map's grids last
 (:func:`fine_grids_for`); only a full fine cell leaves its rays to the walk.
