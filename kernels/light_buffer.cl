@@ -121,9 +121,9 @@ inline void lb_insert_fine_row(const LightBuffer* m, const LbTriangle* o, uint t
         const float2 fhi = (float2)((float)(i * LB_FINE + a + 1) / (float)LB_FINE + m->margin,
                                     y1);
         if (!lb_overlaps(o->a, o->b, o->c, flo, fhi)) continue;
-        const int f = m->fine_base + g * LB_FINE_CELLS + b * LB_FINE + a;
+        const int f = lb_fine_cell(m, g, b, a);
         const int slot = atomic_inc(cells + 2 * f);
-        if (slot < LB_SLOTS) lb_slots[f * LB_SLOTS + slot] = (int)t;
+        if (slot < LB_FINE_SLOTS) lb_slots[f * LB_SLOTS + slot] = (int)t;
     }
 }
 
@@ -190,7 +190,7 @@ __kernel void light_buffer_fine(__global const LightBuffer* restrict lb_maps, co
         const int g = atomic_inc(cells + 2 * m.fine_cell);
         if (g < m.fine_grids) {
             for (int f = 0; f < LB_FINE_CELLS; ++f)
-                lb_cells[m.fine_base + g * LB_FINE_CELLS + f] = (int2)(0);
+                lb_cells[lb_fine_cell(&m, g, f / LB_FINE, f % LB_FINE)] = (int2)(0);
             const int p = atomic_add(cells + 2 * m.fine_cell + 1, LB_SLOTS);
             for (int k = 0; k < LB_SLOTS && p + k < m.fine_pairs; ++k)
                 lb_pairs[p + k] = (int2)(lb_slots[cell * LB_SLOTS + k], cell);

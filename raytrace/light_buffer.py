@@ -41,6 +41,8 @@ LIGHT_BUFFER = np.dtype([("u", _F4), ("v", _F4), ("toward", _F4), ("n_u", np.int
                          ("fine_pairs", np.int32), ("pad", np.int32)])
 LB_SLOTS = 16           #: kernels/light_buffer.h
 LB_FINE = 8             #: kernels/light_buffer.h: a fine grid's cells along each side
+LB_FINE_SLOTS = 32      #: kernels/light_buffer.h: triangles a fine cell lists
+_FINE_STRIDE = LB_FINE_SLOTS // LB_SLOTS   # cells' room a fine cell takes (LB_FINE_STRIDE)
 #: Most cells along a map's side.
 MAX_CELLS = 8192
 #: Most triangles listed: past it the per-frame raster would cost more than the walks it saves.
@@ -161,7 +163,7 @@ class LightBuffer:
                      else int(self.fine_grids))
             m["fine_base"], m["fine_grids"] = n_cells + n_fine, grids
             m["fine_pairs"] = grids * self.pairs_per_grid
-            n_fine += grids * LB_FINE * LB_FINE
+            n_fine += grids * LB_FINE * LB_FINE * _FINE_STRIDE
         self.n_fine_cells = n_fine
         self._alloc(tris if self.n_tris else np.zeros((1, 4), np.float32), n_cells + n_fine)
         return True
@@ -275,7 +277,7 @@ class LightBuffer:
         n_u: each full cell's fine grid, -1 none or not full), ``fine_grids`` (grids the full
         cells asked for, handed out or not), ``fine_pairs`` (the pairs listed for them: past the
         map's ``fine_pairs`` no grid is read), and the grids' ``fine_count`` (grids, LB_FINE,
-        LB_FINE) and ``fine_slots`` (grids, LB_FINE, LB_FINE, LB_SLOTS)."""
+        LB_FINE) and ``fine_slots`` (grids, LB_FINE, LB_FINE, LB_FINE_SLOTS)."""
         m = self.maps[light]
         if m["n_u"] == 0:
             raise ValueError(f"light {light} has no map ({self.reason or 'not directional'})")
@@ -289,7 +291,7 @@ class LightBuffer:
         slots = slots.reshape(*shape, LB_SLOTS)
         asked = int(counters[4])
         g, fb = min(asked, int(m["fine_grids"])), int(m["fine_base"])
-        per = LB_FINE * LB_FINE
+        per = LB_FINE * LB_FINE * _FINE_STRIDE   # cells' entries a grid takes
         fine = self.rt.to_host(self.cells_buf, np.int32, 2 * max(g * per, 1), 2 * fb)
         fslots = self.rt.to_host(self.slots_buf, np.int32, LB_SLOTS * max(g * per, 1),
                                  LB_SLOTS * fb)
@@ -298,9 +300,9 @@ class LightBuffer:
                 "big": int(counters[2] + counters[3]),
                 "grid": np.where(count > LB_SLOTS, slots[..., 0], -1), "fine_grids": asked,
                 "fine_pairs": int(counters[5]),
-                "fine_count": fine[0:2 * g * per:2].reshape(g, LB_FINE, LB_FINE),
+                "fine_count": fine[0:2 * g * per:2 * _FINE_STRIDE].reshape(g, LB_FINE, LB_FINE),
                 "fine_slots": fslots[:LB_SLOTS * g * per].reshape(g, LB_FINE, LB_FINE,
-                                                                   LB_SLOTS)}
+                                                                   LB_FINE_SLOTS)}
 
 
 def ordered_to_float(i: np.ndarray) -> np.ndarray:

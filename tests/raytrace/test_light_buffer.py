@@ -11,7 +11,14 @@ import pyopencl as cl
 import pytest
 
 from kernels.layout import check_struct
-from raytrace.light_buffer import LB_FINE, LB_SLOTS, LIGHT_BUFFER, PAIRS_PER_GRID, LightBuffer
+from raytrace.light_buffer import (
+    LB_FINE,
+    LB_FINE_SLOTS,
+    LB_SLOTS,
+    LIGHT_BUFFER,
+    PAIRS_PER_GRID,
+    LightBuffer,
+)
 from raytrace.render import Renderer, RenderSettings
 from raytrace.render_scene import Material, RenderScene
 from raytrace.render_types import MASK_OPAQUE
@@ -26,7 +33,10 @@ def test_layout_matches_the_device(rt):
 
     check_struct(rt, "light_buffer.h", "LightBuffer", LIGHT_BUFFER)
     assert LIGHT_BUFFER.itemsize == 96
-    assert f"#define LB_SLOTS {LB_SLOTS}\n" in (KERNEL_DIR / "light_buffer.h").read_text()
+    header = (KERNEL_DIR / "light_buffer.h").read_text()
+    for name, value in (("LB_SLOTS", LB_SLOTS), ("LB_FINE", LB_FINE),
+                        ("LB_FINE_SLOTS", LB_FINE_SLOTS)):
+        assert f"#define {name} {value}\n" in header
 
 
 def rotation(yaw: float, pitch: float) -> np.ndarray:
@@ -36,9 +46,12 @@ def rotation(yaw: float, pitch: float) -> np.ndarray:
     return ry @ rx
 
 
-def clutter(rt, *, glass: bool = True, spot: bool = False, seed: int = 3) -> RenderScene:
+def clutter(rt, *, glass: bool = True, spot: bool = False, seed: int = 3,
+            stacks: bool = False) -> RenderScene:
     """A floor, two boxes (one turned and scaled), 60 small random triangles above the floor,
-    a glass box (a dielectric: the opaque instances alone are mapped) and the sun."""
+    a glass box (a dielectric: the opaque instances alone are mapped) and the sun; with
+    ``stacks``, two stacks of 24 and 48 small triangles along the light (as a boat's rigging's
+    stack), whose fine cells list more than a cell's room."""
     rng = np.random.default_rng(seed)
     sc = RenderScene(rt)
     floor = sc.add_material(Material(diffuse=(0.8, 0.7, 0.5)))
@@ -55,6 +68,14 @@ def clutter(rt, *, glass: bool = True, spot: bool = False, seed: int = 3) -> Ren
     centres = rng.uniform((-1.2, 0.3, -1.2), (1.2, 1.2, 1.2), (60, 1, 3))
     tris = (centres + rng.normal(0, 0.08, (60, 3, 3))).reshape(-1, 3)
     sc.add_instance(sc.add_mesh(tris, np.arange(180).reshape(60, 3), material=red))
+    if stacks:
+        toward = -np.asarray(SUN) / np.linalg.norm(SUN)
+        tri = rng.normal(0, 0.03, (3, 3))
+        parts = [c + k * 0.015 * toward + tri + rng.normal(0, 0.003, (3, 3))
+                 for c, n in (((0.3, 0.05, 0.9), 24), ((-0.9, 0.05, -0.2), 48))
+                 for k in range(n)]
+        sc.add_instance(sc.add_mesh(np.concatenate(parts), np.arange(3 * len(parts)).reshape(-1, 3),
+                                    material=red))
     if glass:
         g = sc.add_material(Material(diffuse=(0.1, 0.2, 0.3), ior=1.33, reflectivity=0.1))
         sc.add_instance(sc.add_mesh(*BOX, material=g),
@@ -174,13 +195,18 @@ def test_cells_list_what_a_float64_raster_finds(rt):
     assert (coarse > LB_SLOTS).any()
 
 
-def test_fine_cells_list_what_a_float64_raster_finds(rt):
-    """A coarse map's full cells (3 of 9) each get a fine grid whose cells list every triangle that
-    meets them (the float64 raster of the map LB_FINE times finer) and none beyond a quarter
-    cell; a cell that is not full has none."""
-    sc = clutter(rt)
+@pytest.mark.parametrize("stacks", [False, True])
+def test_fine_cells_list_what_a_float64_raster_finds(rt, stacks):
+    """A coarse map's full cells (3 of 9 or more) each get a fine grid whose cells list every
+    triangle that meets them (the float64 raster of the map LB_FINE times finer) and none beyond
+    a quarter cell; a cell that is not full has none. With the stacks, fine cells list more than
+    a cell's 16 slots, and some more than their own 32."""
+    sc = clutter(rt, stacks=stacks)
     lb = built(rt, sc, 3)
     got = lb.read(0)
+    fc = got["fine_count"]
+    past_a_cell = ((fc > LB_SLOTS) & (fc <= LB_FINE_SLOTS)).any()
+    assert (past_a_cell and (fc > LB_FINE_SLOTS).any()) == stacks
     full = got["count"] > LB_SLOTS
     assert 0 < full.sum() == got["fine_grids"] <= lb.maps[0]["fine_grids"]
     assert (got["grid"][~full] == -1).all()
@@ -202,11 +228,11 @@ def test_fine_cells_list_what_a_float64_raster_finds(rt):
                 key = (j * LB_FINE + b, i * LB_FINE + a)
                 tris, n = must.get(key, {}), got["fine_count"][g, b, a]
                 assert len(tris) <= n <= len(may.get(key, {})), key
-                if n <= LB_SLOTS:
+                if n <= LB_FINE_SLOTS:
                     assert set(tris) <= set(got["fine_slots"][g, b, a, :n].tolist()), key
                 checked += len(tris)
     assert checked > 0
-    assert (got["fine_count"] <= LB_SLOTS).mean() > 0.9   # what a fine cell is for
+    assert (got["fine_count"] <= LB_FINE_SLOTS).mean() > 0.9   # what a fine cell is for
 
 
 def answers(rt, sc, lb, light, org):
@@ -240,10 +266,11 @@ def brute_force_blocked(world, org, toward) -> np.ndarray:
     return hit.any(1), (near & (t > 0)).any(1)
 
 
-@pytest.mark.parametrize("cells", [40, 3])
-def test_answers_are_the_bvh_any_hit(rt, cells):
-    """At 3 cells a third of the map is full cells: their fine grids answer."""
-    sc = clutter(rt)
+@pytest.mark.parametrize("cells,stacks", [(40, False), (3, False), (3, True)])
+def test_answers_are_the_bvh_any_hit(rt, cells, stacks):
+    """At 3 cells a third of the map is full cells: their fine grids answer; with the stacks,
+    through fine cells of up to 32 triangles too, and the fullest walk."""
+    sc = clutter(rt, stacks=stacks)
     lb = built(rt, sc, cells)
     if cells == 3:
         assert (lb.read(0)["count"] > LB_SLOTS).mean() > 0.3
@@ -256,16 +283,24 @@ def test_answers_are_the_bvh_any_hit(rt, cells):
     w = rng.dirichlet((1, 1, 1), n)
     on_tris = np.einsum("nk,nki->ni", w, world[pick]) - 2e-3 * np.asarray(SUN)
     air = rng.uniform((-2.5, 0, -2.5), (2.5, 1.5, 2.5), (n, 3))
-    org = np.concatenate([floor, on_tris, air]).astype(np.float32)
+    org = [floor, on_tris, air]
+    if stacks:   # under the stacks, along the light
+        toward = -np.asarray(SUN) / np.linalg.norm(SUN)
+        org.append(np.einsum("nk,nki->ni", w, world[-72:][pick % 72])
+                   - rng.uniform(0.05, 0.3, (n, 1)) * toward)
+    org = np.concatenate(org).astype(np.float32)
     got = answers(rt, sc, lb, 0, org)
     known = got[:, 0] >= 0
-    assert known.mean() > 0.9
+    assert known.mean() > (0.7 if stacks else 0.9)
+    if stacks:
+        under = got[3 * n:, 0]
+        assert (under == -1).mean() > 0.2 and (under >= 0).mean() > 0.2
     assert np.array_equal(got[known, 0], got[known, 1])   # the BVH's answer, bit for bit
     assert 0.1 < got[known, 1].mean() < 0.9               # both kinds of answer occur
     toward = -np.asarray(SUN, np.float64) / np.linalg.norm(SUN)
     blocked, near = brute_force_blocked(world, org.astype(np.float64), toward)
     sure = known & ~near
-    assert sure.mean() > 0.85
+    assert sure.mean() > (0.65 if stacks else 0.85)
     assert np.array_equal(got[sure, 0] == 1, blocked[sure])
 
 
@@ -319,7 +354,7 @@ def test_counters_say_how_each_query_was_answered(rt, grids, pairs):
     fine = np.zeros(n, np.int64)
     in_grid = full & (grid >= 0)
     fine[in_grid] = cells["fine_count"][grid[in_grid], fv[in_grid], fu[in_grid]]
-    left = full & ((grid < 0) | (fine > LB_SLOTS))
+    left = full & ((grid < 0) | (fine > LB_FINE_SLOTS))
     assert abs(c["full"] - left.sum()) <= 0.01 * n
     if overflow:
         assert c["fine"] == 0 and c["full"] > 0.02 * n
@@ -331,8 +366,10 @@ def test_counters_say_how_each_query_was_answered(rt, grids, pairs):
         assert c["full"] > 0
     # a cell tested clear tests all its triangles, a blocked one at least one
     listed = np.where(full, fine, count)
-    tested = listed[on & (listed > 0) & (listed <= LB_SLOTS)]
-    assert c["tested_clear"] + c["blocked"] <= c["triangles"] <= tested.sum() + 0.01 * n * LB_SLOTS
+    room = np.where(full, LB_FINE_SLOTS, LB_SLOTS)
+    tested = listed[on & (listed > 0) & (listed <= room)]
+    assert (c["tested_clear"] + c["blocked"] <= c["triangles"]
+            <= tested.sum() + 0.01 * n * LB_FINE_SLOTS)
 
 
 def test_rays_off_the_map_walk_the_bvh_once_a_triangle_leaves_it(rt):
