@@ -16,7 +16,8 @@
 #   list-traced stage would cost at best.
 # PART fine: the light buffer's fine grids (a full cell's 8 x 8 fine cells) against the tree
 #   before them, in $OLD (a checkout of eadbbbb: git worktree add DIR eadbbbb; on the device, a
-#   copy of its app, kernels, lbm, raytrace, bench and tests beside today's scenes): the device
+#   copy of its app, kernels, lbm, raytrace, bench and tests beside today's scenes; for fine
+#   cells of 32 triangles, at 1ee46d6 and later, a checkout of cf5f4c2, whose fine cells hold 16): the device
 #   tests of the light buffer, then the baseline scene per depth and whole at 1920x1080 in turns
 #   twice, at 3840x2160, and the pool (its boat floats: a build every frame) whole and per depth.
 # PART leanfine: bench/shadow_lean_probe.py (as PART lean) on the tree with fine grids against
@@ -96,6 +97,9 @@ fine)
     in_tree "$old" bench frame $f --out "$out/pool_old" | tail -1
     lb bench frame $f --per-depth --no-overlap --out "$out/pool_pd_fine" | tail -1
     in_tree "$old" bench frame $f --per-depth --no-overlap --out "$out/pool_pd_old" | tail -1
+    a="--scene bench/scenes/pool_static_boat.toml --cells 1024 --size 1920 1080 --repeats 20"
+    timeout 150 python3 bench/shadow_lean_probe.py $a --full-first --json "$out/lean_first.json" \
+        | tail -2
     ;;
 leanfine)
     old=${OLD:?OLD: a checkout of eadbbbb}
