@@ -39,6 +39,9 @@
 # (bench/shadow_lean_probe.py, kernels/render_shadow_lean_probe.cl) and its light_buffer_full
 # (kernels/light_buffer.h) copied in, so that --full-first runs there; ordered on 6e5b647 or
 # later.
+# PART coop: the tail levels' cooperative kernels (a work-group per ray from --coop-from D, 2
+#   on a GPU) now that fine grids leave few walks: the baseline scene per depth and whole at
+#   1920x1080 with D = 2, 3, 4 and off, in turns twice, and the pool whole.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -143,6 +146,18 @@ ordered)
     done
     timeout 200 python3 bench/shadow_lean_probe.py $a --size 3840 2160 \
         --json "$out/ordered_4k.json" | tail -2
+    ;;
+coop)
+    for rep in 1 2; do
+        for c in 2 3 4 off; do
+            lb bench frame $f $static --per-depth --no-overlap --coop-from $c \
+                --out "$out/static_pd_coop${c}_$rep" | tail -1
+            lb bench frame $f $static --coop-from $c --out "$out/static_coop${c}_$rep" | tail -1
+        done
+    done
+    for c in 2 off; do
+        lb bench frame $f --coop-from $c --out "$out/pool_coop$c" | tail -1
+    done
     ;;
 *)
     echo "unknown PART $part" >&2
