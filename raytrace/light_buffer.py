@@ -64,7 +64,7 @@ _MAX_FINE_ITEMS = 1 << 18
 
 def fine_grids_for(map_cells: int) -> int:
     """Fine grids a map of ``map_cells`` cells has room for: one per 256 cells (2,708 for the
-    baseline scene's map of 1024 x 677, which fills 1,431; 4.5 KiB a grid), at least 16."""
+    baseline scene's map of 1024 x 677, which fills 1,431; 9 KiB a grid), at least 16."""
     return max(16, map_cells // 256)
 
 
