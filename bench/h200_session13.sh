@@ -42,6 +42,9 @@
 # PART coop: the tail levels' cooperative kernels (a work-group per ray from --coop-from D, 2
 #   on a GPU) now that fine grids leave few walks: the baseline scene per depth and whole at
 #   1920x1080 with D = 2, 3, 4 and off, in turns twice, and the pool whole.
+# PART alllevels: bench/shadow_lean_probe.py --full-first --all-levels: every level's shadow
+#   rays (0-5) as lists traced in one launch against each level's alone and the primary trace,
+#   twice (on 0a2f0c1 or later).
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
@@ -157,6 +160,13 @@ coop)
     done
     for c in 2 off; do
         lb bench frame $f --coop-from $c --out "$out/pool_coop$c" | tail -1
+    done
+    ;;
+alllevels)
+    a="--scene bench/scenes/pool_static_boat.toml --cells 1024 --size 1920 1080 --repeats 20"
+    for rep in 1 2; do
+        timeout 250 python3 bench/shadow_lean_probe.py $a --full-first --all-levels \
+            --json "$out/all_levels_$rep.json" | tail -1
     done
     ;;
 *)

@@ -35,7 +35,9 @@ def event_ms(evt) -> float:
 class LeanShadowProbe:
     """The two probe kernels bound to one level of ``world``'s renderer."""
 
-    def __init__(self, world, depth: int, full_first: bool = False):
+    def __init__(self, world, depth: int, full_first: bool = False, shared: tuple | None = None):
+        """``shared``: (list, list_counts, capacity) of a list several levels write
+        (:func:`time_all_levels`) instead of one of its own."""
         import pyopencl as cl
 
         from kernels.errors import InputError
@@ -56,9 +58,11 @@ class LeanShadowProbe:
         self.saved = rt.buffer(self.size)
         cl.enqueue_copy(rt.queue, self.saved, self.radiance)
         self.capacity = max(self.n, 1)
-        # the list, then the rays of full cells (LEAN_FULL_FIRST)
-        self.list = rt.buffer(2 * self.capacity * RAY.itemsize)
-        self.list_counts = rt.buffer(12)
+        if shared:
+            self.list, self.list_counts, self.capacity = shared
+        else:   # the list, then the rays of full cells (LEAN_FULL_FIRST)
+            self.list = rt.buffer(2 * self.capacity * RAY.itemsize)
+            self.list_counts = rt.buffer(12)
         self.local = r.settings.local_size
         scene = r.scene.scene.trace_bindings()
         geom = r.scene.shade_bindings()
@@ -181,6 +185,55 @@ def time_level(probe: LeanShadowProbe, repeats: int) -> dict:
     return out
 
 
+def time_all_levels(args) -> dict:
+    """Every level's shadow rays (0-5: frames of 1, 3 and 5 bounces on the same water, each
+    leaving its last two levels in the renderer's buffers) written to one list and traced in
+    one launch, against each level's list traced alone: what a stage would cost that traced
+    every level's list once after the last trace. Timing only (the merged launch adds into a
+    level-0 radiance buffer)."""
+    import pyopencl as cl
+
+    from app.world import World
+    from raytrace.render_types import RAY
+
+    lb = {} if args.light_buffer is None else {"light_buffer": args.light_buffer}
+    worlds, rt = [], None
+    for bounces in (1, 3, 5):
+        w = World(args.scene, rt or args.device, width=args.size[0], height=args.size[1],
+                  cells=args.cells, bounces=bounces, **lb)
+        rt = w.rt
+        for _ in range(args.settle):
+            w.frame(1 / 60)
+        w.frame(0.0)
+        rt.queue.finish()
+        worlds.append((w, (bounces - 1, bounces)))
+    probes = [LeanShadowProbe(w, d, args.full_first) for w, ds in worlds for d in ds]
+    total = sum(max(p.n, 1) for p in probes)
+    shared = (rt.buffer(2 * total * RAY.itemsize), rt.buffer(12), total)
+    merged = [LeanShadowProbe(w, d, args.full_first, shared) for w, ds in worlds for d in ds]
+    times: dict[str, list] = {}
+    for rep in range(args.repeats + 1):
+        alone = [p.run_lean() for p in probes]
+        cl.enqueue_fill_buffer(rt.queue, shared[1], np.uint32(0), 0, 12)
+        for m in merged:
+            m.emit.launch(m._size(m.n, m.local), (m.local,))
+        n = int(rt.to_host(shared[1], np.uint32, 3).sum())
+        lean = merged[0].lean.launch(merged[0]._size(n, merged[0].local), (merged[0].local,))
+        trace = probes[0].trace.launch(probes[0]._size(probes[0].n, probes[0].local),
+                                       (probes[0].local,))
+        rt.queue.finish()
+        if rep:
+            for d, (_, e, *_) in enumerate(alone):
+                times.setdefault(f"lean_d{d}", []).append(event_ms(e))
+            times.setdefault("lean_all_one_launch", []).append(event_ms(lean))
+            times.setdefault("primary_trace", []).append(event_ms(trace))
+    out = {f"{k}_ms": float(np.median(v)) for k, v in times.items()}
+    out["lean_levels_sum_ms"] = sum(out[f"lean_d{d}_ms"] for d in range(6))
+    out["hits"] = [p.n for p in probes]
+    out["list"] = n
+    return out
+
+
 def kernel_registers(rt) -> dict:
     """Registers and spills of the probe's and the shadow stage's kernels from the compiler's
     report (NVIDIA, with LBWATER_CL_OPTIONS=-cl-nv-verbose); empty elsewhere."""
@@ -208,6 +261,8 @@ def main(argv=None) -> int:
                    help="the light buffer's cells (default: the device's choice)")
     p.add_argument("--full-first", action="store_true",
                    help="trace the rays from full light-buffer cells first (LEAN_FULL_FIRST)")
+    p.add_argument("--all-levels", action="store_true",
+                   help="also every level's lists traced in one launch (time_all_levels)")
     args = p.parse_args(argv)
 
     from kernels.errors import InputError
@@ -250,6 +305,11 @@ def measure(args) -> int:
               f"{level['first_hits']} hits first; " + ", ".join(
                   f"{k[:-3]} {v:.4f}" for k, v in level.items() if k.endswith("_ms")) + " ms",
               flush=True)
+    if args.all_levels:
+        result["all_levels"] = time_all_levels(args)
+        print("all levels: " + ", ".join(f"{k[:-3]} {v:.4f}" for k, v in
+                                         result["all_levels"].items() if k.endswith("_ms"))
+              + f" ms; hits {result['all_levels']['hits']}", flush=True)
     result["registers"] = kernel_registers(world.rt)
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1))

@@ -80,3 +80,26 @@ def test_hits_of_full_cells_first_give_render_shadow_s_radiance(rt, depth):
     first = rt.to_host(probe.first_list, np.uint32, res["first_hits"])
     probe.restore()
     assert sorted(first.tolist()) == np.flatnonzero(flags).tolist()
+
+
+def test_every_level_s_list_in_one_launch_holds_each_level_s_rays(rt):
+    """time_all_levels: the merged list holds exactly the rays of the six levels' own lists."""
+    import argparse
+
+    from bench.shadow_lean_probe import time_all_levels
+
+    args = argparse.Namespace(scene=str(STATIC), device=rt, size=(64, 48), cells=64, settle=1,
+                              repeats=1, light_buffer=24, full_first=True)
+    out = time_all_levels(args)
+    assert len(out["hits"]) == 6 and out["hits"][0] == 64 * 48 and out["hits"][1] > 0
+    assert out["lean_all_one_launch_ms"] > 0 and out["primary_trace_ms"] > 0
+    w = World(STATIC, rt, width=64, height=48, cells=64, bounces=1, light_buffer=24)
+    w.frame(1 / 60)
+    w.frame(0.0)
+    rt.queue.finish()
+    alone = 0
+    for depth in (0, 1):
+        probe = LeanShadowProbe(w, depth, full_first=True)
+        *_, n_cross, n_other = probe.run_lean()
+        alone += n_cross + n_other + probe.full_rays
+    assert out["list"] >= alone > 0   # levels 2-5 add theirs
