@@ -44,7 +44,7 @@
 #   1920x1080 with D = 2, 3, 4 and off, in turns twice, and the pool whole.
 # PART alllevels: bench/shadow_lean_probe.py --full-first --all-levels: every level's shadow
 #   rays (0-5) as lists traced in one launch against each level's alone and the primary trace,
-#   twice (on 0a2f0c1 or later).
+#   twice (on 4ac7b0d or later).
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}
