@@ -8,7 +8,10 @@ kernels/render_shadow_lean_probe.cl: ``render_shadow_emit`` (render_shadow's sha
 loop, writing each traced shadow ray to a list, crossing rays first) and ``render_shadow_lean``
 (the list alone, traced with the same shadow_transmittance); level 0's primary trace runs beside
 them for the ratio. Both ways must give the same radiance (checked each run); the medians of the
-OpenCL event times go to ``--json``.
+OpenCL event times go to ``--json``. Also timed: the renderer's own shadow kernels over the hits
+of full light-buffer cells first (``render_shadow_ordered``, ``_binned``; the same radiance,
+checked); with ``--full-first`` the list takes those rays first; with ``--all-levels`` every
+level's list (0-5) is traced in one launch too (:func:`time_all_levels`).
 
     PYTHONPATH=$PWD python bench/shadow_lean_probe.py --scene bench/scenes/pool_static_boat.toml \\
         --cells 1024 --size 1920 1080 --repeats 20 --json lean.json
