@@ -60,6 +60,7 @@ typedef struct {
     float2 g;          /* d(depth)/d(cu, cv), where plane */
     bool plane;
     int i0, j0, w, n;  /* first cell, cells across, cells in the box (0: off the map) */
+    float2 lo, hi;     /* the box in cell coordinates, grown by the margin */
 } LbTriangle;
 
 inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restrict lb_tris,
@@ -80,8 +81,8 @@ inline LbTriangle lb_project(const LightBuffer* m, __global const float4* restri
     o.s0 = s0;
     o.smax = fmax(s0, fmax(s1, s2));
     o.slack = m->depth_slack + 1e-4f * (o.smax - fmin(s0, fmin(s1, s2)));
-    const float2 lo = fmin(o.a, fmin(o.b, o.c)) - m->margin;
-    const float2 hi = fmax(o.a, fmax(o.b, o.c)) + m->margin;
+    const float2 lo = o.lo = fmin(o.a, fmin(o.b, o.c)) - m->margin;
+    const float2 hi = o.hi = fmax(o.a, fmax(o.b, o.c)) + m->margin;
     if (!(all(isfinite(lo)) && all(isfinite(hi)) && isfinite(o.smax))) return o;
     if (count_outside
         && (lo.x < 0.0f || lo.y < 0.0f || hi.x >= (float)m->n_u || hi.y >= (float)m->n_v))
@@ -109,8 +110,7 @@ inline void lb_insert_fine_row(const LightBuffer* m, const LbTriangle* o, uint t
                                int g, int b, __global int* restrict cells,
                                __global int* restrict lb_slots)
 {
-    const float2 lo = fmin(o->a, fmin(o->b, o->c)) - m->margin;
-    const float2 hi = fmax(o->a, fmax(o->b, o->c)) + m->margin;
+    const float2 lo = o->lo, hi = o->hi;
     const float y0 = (float)(j * LB_FINE + b) / (float)LB_FINE - m->margin;
     const float y1 = (float)(j * LB_FINE + b + 1) / (float)LB_FINE + m->margin;
     if (hi.y < y0 || lo.y > y1) return;

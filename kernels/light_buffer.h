@@ -94,15 +94,23 @@ inline int lb_fine_cell(const LightBuffer* m, int g, int b, int a)
     return m->fine_base + LB_FINE_STRIDE * (g * LB_FINE_CELLS + b * LB_FINE + a);
 }
 
+/* Map m's cell of org in lb_cells (its coordinates in *cu, *cv); -1 off the map (or no map). */
+inline int lb_cell_of(const LightBuffer* m, float3 org, float* cu, float* cv)
+{
+    *cu = dot(org, m->u.xyz) + m->u.w;
+    *cv = dot(org, m->v.xyz) + m->v.w;
+    if (!(*cu >= 0.0f && *cu < (float)m->n_u && *cv >= 0.0f && *cv < (float)m->n_v)) return -1;
+    return m->cell_base + (int)*cv * m->n_u + (int)*cu;
+}
+
 /* Whether org lies in a full cell of light l's map (its rays answered by a fine grid or a walk);
  * bench/shadow_lean_probe.py's order of rays. */
 inline bool light_buffer_full(LIGHT_BUFFER_PARAMS, uint light, float3 org)
 {
     const LightBuffer m = lb_maps[light];
-    const float cu = dot(org, m.u.xyz) + m.u.w, cv = dot(org, m.v.xyz) + m.v.w;
-    if (m.n_u == 0 || !(cu >= 0.0f && cu < (float)m.n_u && cv >= 0.0f && cv < (float)m.n_v))
-        return false;
-    return lb_cells[m.cell_base + (int)cv * m.n_u + (int)cu].x > LB_SLOTS;
+    float cu, cv;
+    const int cell = lb_cell_of(&m, org, &cu, &cv);
+    return cell >= 0 && lb_cells[cell].x > LB_SLOTS;
 }
 
 /* Whether a shadow ray from org along dir (toward light l) within [0, tmax) is blocked by an
@@ -115,12 +123,12 @@ inline int light_buffer_blocked(LIGHT_BUFFER_PARAMS, __global const Instance* re
 {
     const LightBuffer m = lb_maps[light];
     if (m.n_u == 0) return LB_UNKNOWN;
-    const float cu = dot(org, m.u.xyz) + m.u.w, cv = dot(org, m.v.xyz) + m.v.w;
-    if (!(cu >= 0.0f && cu < (float)m.n_u && cv >= 0.0f && cv < (float)m.n_v)) {
+    float cu, cv;
+    const int cell = lb_cell_of(&m, org, &cu, &cv);
+    if (cell < 0) {
         LB_COUNT(LB_CNT_OFF_MAP, 1);
         return lb_cells[m.outside_cell].x ? LB_UNKNOWN : LB_CLEAR;
     }
-    const int cell = m.cell_base + (int)cv * m.n_u + (int)cu;
     const int2 c = lb_cells[cell];
     if (c.x == 0) {
         LB_COUNT(LB_CNT_EMPTY, 1);

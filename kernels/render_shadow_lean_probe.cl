@@ -140,18 +140,17 @@ inline uint ordered_hit(const uint j, const uint n, const uint n_first,
     return j - n_first;
 }
 
-__kernel void render_shadow_ordered(SCENE_PARAMS, RENDER_GEOM_PARAMS,
-                                    __constant const RenderParams* prm,
-                                    __global const Light* restrict lights,
-                                    __global const Ray* restrict rays,
-                                    __global const Hit* restrict hits,
-                                    __global const uint* counts, const uint depth,
-                                    __global float4* restrict radiance,
-                                    __global const float4* restrict caustic_map,
-                                    const CausticParams cprm, LIGHT_BUFFER_PARAMS,
-                                    __global const uchar* restrict first_flags,
-                                    __global const uint* restrict first_list,
-                                    __global const uint* restrict first_count)
+/* The parameters of both ordered kernels: render_shadow's, then the classification's. */
+#define ORDERED_SHADOW_PARAMS                                                                  \
+    SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,                      \
+        __global const Light* restrict lights, __global const Ray* restrict rays,             \
+        __global const Hit* restrict hits, __global const uint* counts, const uint depth,     \
+        __global float4* restrict radiance, __global const float4* restrict caustic_map,      \
+        const CausticParams cprm, LIGHT_BUFFER_PARAMS,                                         \
+        __global const uchar* restrict first_flags, __global const uint* restrict first_list, \
+        __global const uint* restrict first_count
+
+__kernel void render_shadow_ordered(ORDERED_SHADOW_PARAMS)
 {
     const uint n = counts[depth], n_first = *first_count;
     for (uint j = get_global_id(0); j < n_first + n; j += get_global_size(0)) {
@@ -163,16 +162,7 @@ __kernel void render_shadow_ordered(SCENE_PARAMS, RENDER_GEOM_PARAMS,
 }
 
 __kernel __attribute__((reqd_work_group_size(RENDER_BIN_WG, 1, 1))) void
-render_shadow_ordered_binned(SCENE_PARAMS, RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
-                             __global const Light* restrict lights,
-                             __global const Ray* restrict rays, __global const Hit* restrict hits,
-                             __global const uint* counts, const uint depth,
-                             __global float4* restrict radiance,
-                             __global const float4* restrict caustic_map,
-                             const CausticParams cprm, LIGHT_BUFFER_PARAMS,
-                             __global const uchar* restrict first_flags,
-                             __global const uint* restrict first_list,
-                             __global const uint* restrict first_count)
+render_shadow_ordered_binned(ORDERED_SHADOW_PARAMS)
 {
     __local RenderBins bins;
     const uint n = counts[depth], n_first = *first_count;
