@@ -278,10 +278,12 @@ def caustic_settings(scene: Scene, mode: str | None = None):
 
 
 def render_settings(scene: Scene, *, width=None, height=None, spp=None, bounces=None,
-                    aov=False, seed=None, coop_from=None, cost_bins=False, light_buffer=0):
+                    aov=False, seed=None, coop_from=None, cost_bins=False, light_buffer=0,
+                    shadow_list=False):
     """The renderer's settings from ``[render]`` and ``[shading]``, with overrides;
-    ``coop_from``, ``cost_bins`` and ``light_buffer``: the device's choices
-    (raytrace.render.device_coop_from, device_cost_bins, device_light_buffer)."""
+    ``coop_from``, ``cost_bins``, ``light_buffer`` and ``shadow_list``: the device's choices
+    (raytrace.render.device_coop_from, device_cost_bins, device_light_buffer,
+    device_shadow_list)."""
     from raytrace.render import RenderSettings
 
     r, sh = scene.render, scene.shading
@@ -295,4 +297,4 @@ def render_settings(scene: Scene, *, width=None, height=None, spp=None, bounces=
         exposure=sh.exposure if sh else 1.0,
         min_weight=sh.min_contribution if sh else 1e-3,
         seed=(seed if seed is not None else sh.seed if sh else 0), coop_from=coop_from,
-        cost_bins=cost_bins, light_buffer=light_buffer)
+        cost_bins=cost_bins, light_buffer=light_buffer, shadow_list=shadow_list)

@@ -70,6 +70,10 @@ def add_arguments(p) -> None:
                    help="cells along each directional light's map of what blocks it "
                         "(RenderSettings.light_buffer: the shadow rays' any-hit query without a "
                         "BVH walk, the same image); 0: none; default: the device's choice")
+    p.add_argument("--shadow-list", choices=("on", "off"), default=None,
+                   help="trace every level's shadow rays as one list in one launch after the "
+                        "last level (RenderSettings.shadow_list), or (off) a launch per level; "
+                        "default: the device's choice (on a GPU)")
     p.add_argument("--no-profiling", action="store_true",
                    help="run on a queue without profiling (no per-stage times: wall and latency "
                         "only), to see what the event timestamps cost")
@@ -177,6 +181,9 @@ def run(args) -> int:
         bins_arg = getattr(args, "cost_bins", None)
         if bins_arg is not None:
             world.renderer.set_cost_bins(bins_arg == "on")
+        list_arg = getattr(args, "shadow_list", None)
+        if list_arg is not None:
+            world.renderer.set_shadow_list(list_arg == "on")
         world.renderer.set_direct_crossings(getattr(args, "direct_crossings", "on") == "on")
         world.renderer.set_one_crossing(getattr(args, "one_crossing", "on") == "on")
         for _ in range(args.warmup):
@@ -233,6 +240,7 @@ def run(args) -> int:
                "direct_crossings": world.renderer.settings.direct_crossings,
                "one_crossing": world.renderer.settings.one_crossing,
                "light_buffer": world.renderer.settings.light_buffer,
+               "shadow_list": world.renderer.settings.shadow_list,
                "caustics": args.caustics or "scene", "boats": len(scene.boats),
                "caustic_photons": scene.shading.caustic_photons,
                "rays_per_depth": " ".join(str(n) for n in st.rays_per_depth),

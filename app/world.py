@@ -152,6 +152,7 @@ class World:
             device_coop_from,
             device_cost_bins,
             device_light_buffer,
+            device_shadow_list,
         )
         from raytrace.render_types import STATS_LEN
 
@@ -186,7 +187,8 @@ class World:
         self.renderer = Renderer(self.rt, self.render_scene, render_settings(
             scene, width=width, height=height, spp=spp, bounces=bounces, aov=aov, seed=seed,
             coop_from=device_coop_from(self.rt), cost_bins=device_cost_bins(self.rt),
-            light_buffer=device_light_buffer(self.rt) if light_buffer is None else light_buffer))
+            light_buffer=device_light_buffer(self.rt) if light_buffer is None else light_buffer,
+            shadow_list=device_shadow_list(self.rt)))
         self._caustic_box = a.caustic_box
         self._caustics = None           # raytrace.caustics.Caustics, made when first turned on
         self.set_caustics(caustic_settings(scene).mode if caustics is None else caustics)

@@ -4,6 +4,7 @@
  * after the last level of a chunk, a second launch tonemaps the chunk's pixels to RGBA8. */
 #include "common.h"
 #include "render_surface.h"
+#include "render_shadow_list.h"
 
 inline uchar4 tonemap_rgba8(float3 radiance, __constant const RenderParams* prm)
 {
@@ -30,7 +31,8 @@ inline void accumulate_run(__constant const Camera* cam, __global const Ray* ray
 }
 
 /* Grid-stride over k. gp.finish: pixel q0 + k (k < n_q) is tonemapped to RGBA8 (after the
- * chunk's last level was accumulated). Otherwise ray k (k < n): its children go into `out`
+ * chunk's last level was accumulated), GATHER_FINISH_SHADOW_LIST: with the shadow list's light
+ * of the pixel added to the framebuffer first (render_shadow_list.h). Otherwise ray k (k < n): its children go into `out`
  * (gp.scatter) and, if it starts its pixel's run, the run is accumulated (gp.accumulate). The
  * scatter reads no radiance: with RenderSettings.overlap_levels it runs before the level's shadow
  * rays (render_shadow_trace.cl), the accumulation after them. */
@@ -40,15 +42,24 @@ __kernel void render_gather(RENDER_GEOM_PARAMS, __constant const RenderParams* p
                             const uint depth, __global const uint* child_offsets,
                             __global const uint* block_sums, __global Ray* out,
                             const GatherParams gp, __global const float4* radiance,
-                            __global float4* fb, __global uchar4* rgba)
+                            __global float4* fb, __global uchar4* rgba,
+                            __global ulong* restrict shadow_light)
 {
     const uint n = counts[depth];
     if (gp.finish) {
         for (uint k = get_global_id(0); k < gp.n_q; k += get_global_size(0)) {
             uint x, y;
-            if (!pixel_of(cam, gp.q0 + k, &x, &y)) continue;
+            const uint q = gp.q0 + k;
+            const bool listed = gp.finish == GATHER_FINISH_SHADOW_LIST;
+            const float3 light = listed ? shadow_light_take(shadow_light, q) : (float3)(0.0f);
+            if (!pixel_of(cam, q, &x, &y)) continue;
             const uint p = y * cam->width + x;
-            rgba[p] = tonemap_rgba8(fb[p].xyz, prm);
+            float4 c = fb[p];
+            if (listed) {
+                c.xyz += light;
+                fb[p] = c;
+            }
+            rgba[p] = tonemap_rgba8(c.xyz, prm);
         }
         return;
     }

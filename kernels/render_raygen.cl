@@ -20,14 +20,16 @@ inline Ray primary_ray(__constant const Camera* cam, uint q, uint s)
     return r;
 }
 
-/* Also zeroes the frame's stats (rp.zero_stats: the first chunk), launched with at least
- * RENDER_STATS_LEN work-items. */
+/* Also zeroes the frame's stats (rp.zero_stats: the first chunk) and the chunk's shadow-list
+ * counts (render_shadow_list.cl), launched with at least RENDER_STATS_LEN work-items. */
 __kernel void render_raygen(__constant const Camera* cam, const RaygenParams rp,
-                            __global Ray* rays, __global uint* counts, __global uint* stats)
+                            __global Ray* rays, __global uint* counts, __global uint* stats,
+                            __global uint* list_counts)
 {
     const uint i = get_global_id(0);
     if (i == 0) counts[0] = rp.n_rays;
     if (rp.zero_stats && i < RENDER_STATS_LEN) stats[i] = 0u;
+    if (i < 3) list_counts[i] = 0u;
     if (i >= rp.n_rays) return;
     rays[i] = primary_ray(cam, rp.q0 + i / cam->spp, i % cam->spp);
 }

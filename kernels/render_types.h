@@ -46,10 +46,18 @@
 #define MESH_TRI_MATERIALS 4u
 #define MESH_DYNAMIC 8u       /* positions/normals in the dynamic arrays (g_dpos, g_dnrm) */
 /* Depth limit and the stats buffer: stats[d] = rays traced at depth d over the frame,
- * stats[RENDER_STAT_DROPPED] = children dropped because the wavefront was full. */
+ * stats[RENDER_STAT_DROPPED] = children dropped because the wavefront was full; with the shadow
+ * list (render_shadow_list.cl), the shadow rays it traced and those traced at once for want of
+ * room. */
 #define RENDER_MAX_DEPTH 32
 #define RENDER_STAT_DROPPED (RENDER_MAX_DEPTH + 1)
-#define RENDER_STATS_LEN (RENDER_MAX_DEPTH + 2)
+#define RENDER_STAT_SHADOW_LISTED (RENDER_MAX_DEPTH + 2)
+#define RENDER_STAT_SHADOW_AT_ONCE (RENDER_MAX_DEPTH + 3)
+#define RENDER_STATS_LEN (RENDER_MAX_DEPTH + 4)
+/* A shadow-list entry's pixel field: the tile-order pixel q (< 2^28: 16384^2 pixels) and, above
+   it, the light's index (< RENDER_MAX_LIGHTS). */
+#define SHADOW_RAY_LIGHT_SHIFT 28
+#define SHADOW_RAY_PIXEL_MASK ((1u << SHADOW_RAY_LIGHT_SHIFT) - 1u)
 
 /* 48 bytes: three float4 rows, 16-byte aligned so a ray moves as three vector loads/stores.
  * One wavefront entry. */
@@ -61,6 +69,25 @@ typedef struct __attribute__((aligned(16))) {
     float wr, wg, wb;   /* contribution weight per channel, <= 1 */
     uint sample;        /* primary sample index within its pixel (for AOVs) */
 } Ray;
+
+/* 48 bytes, as a Ray. One shadow ray of the shadow list (render_shadow_list.cl): what it
+ * traces and what the light adds to its pixel when nothing blocks it. */
+typedef struct __attribute__((aligned(16))) {
+    float ox, oy, oz;   /* origin (m), already offset off the surface */
+    uint pixel_light;   /* q | light << SHADOW_RAY_LIGHT_SHIFT */
+    float dx, dy, dz;   /* unit direction to the light */
+    int medium;         /* material id of the dielectric the ray starts in, -1: air */
+    float cr, cg, cb;   /* the light's unshadowed share of the pixel: w E brdf */
+    float tmax;         /* distance to the light, INFINITY: directional */
+} ShadowRay;
+
+/* 16 bytes. The shadow list's per-launch values: its two parts' room in entries. The list holds
+ * main_room entries, then full_room for the rays that start in a full light-buffer cell (traced
+ * first: the costliest). */
+typedef struct {
+    uint main_room, full_room;
+    uint pad0, pad1;
+} ShadowListParams;
 
 /* 96 bytes. Pinhole camera; basis vectors already scaled by the image-plane extent. */
 typedef struct {
@@ -144,8 +171,10 @@ typedef struct {
     uint accumulate;    /* 1: add each pixel's run of rays' radiance into the framebuffer */
     uint q0;            /* first tile-order pixel of the chunk */
     uint n_q;           /* pixels of the chunk */
-    uint finish;        /* 1: the tonemap pass after the chunk's last level (no rays) */
+    uint finish;        /* the tonemap pass after the chunk's last level (no rays): 1, or
+                           GATHER_FINISH_SHADOW_LIST: the shadow list's light added first */
 } GatherParams;
+#define GATHER_FINISH_SHADOW_LIST 2u
 
 /* 32 bytes. Primary-hit outputs per pixel (sample 0 of the pixel). */
 typedef struct {

@@ -87,6 +87,7 @@ from raytrace.render_scene import RenderScene
 from raytrace.render_types import (
     AOV,
     CAMERA,
+    GATHER_FINISH_SHADOW_LIST,
     GATHER_PARAMS,
     MASK_OPAQUE,
     MAX_DEPTH,
@@ -95,7 +96,11 @@ from raytrace.render_types import (
     RENDERPARAMS,
     SCAN_BLOCK,
     SCAN_WG,
+    SHADOW_LIST_PARAMS,
+    SHADOW_RAY,
     STAT_DROPPED,
+    STAT_SHADOW_AT_ONCE,
+    STAT_SHADOW_LISTED,
     STATS_LEN,
     TILE,
     FresnelMode,
@@ -154,6 +159,26 @@ class RenderSettings:
                                   #: map of the opaque triangles' shadows (raytrace.light_buffer:
                                   #: the shadow rays' any-hit query without a BVH walk, the
                                   #: same image); 0: none
+    shadow_list: bool = False     #: every level's shadow rays written by the shading to one
+                                  #: list and traced in one launch after the last level
+                                  #: (kernels/render_shadow_list.cl); no per-level shadow
+                                  #: launches, so overlap_levels, cost_bins and fuse_trace_shade
+                                  #: have no effect. The image differs from the per-level
+                                  #: stage's by float rounding only
+    shadow_list_room: float = 0.5  #: the list's entries per ray slot (and an eighth more for
+                                   #: rays in full light-buffer cells); a ray with no room is
+                                   #: traced at once by the shading (the same image)
+
+    @property
+    def overlaps(self) -> bool:
+        """Whether level d's shadow rays go with level d + 1's trace (``overlap_levels``, no
+        ``shadow_list``)."""
+        return self.overlap_levels and not self.shadow_list
+
+    @property
+    def fuses(self) -> bool:
+        """Whether one kernel traces and shades (``fuse_trace_shade``, no ``shadow_list``)."""
+        return self.fuse_trace_shade and not self.shadow_list
 
     def resolved(self) -> RenderSettings:
         """Validated copy with the sample pattern decided; one-line ValueErrors."""
@@ -174,6 +199,9 @@ class RenderSettings:
             raise ValueError(f"local_size must be 32, 64, 128, 256 or 512, got {self.local_size}")
         if not 1.0 <= self.capacity_factor <= 64:
             raise ValueError(f"capacity_factor must lie in [1, 64], got {self.capacity_factor}")
+        if not (math.isfinite(self.shadow_list_room) and 0 <= self.shadow_list_room <= 8):
+            raise ValueError(f"render shadow_list_room must lie in [0, 8], got "
+                             f"{self.shadow_list_room}")
         lb = self.light_buffer
         if not isinstance(lb, int | np.integer) or not 0 <= lb <= MAX_LIGHT_BUFFER_CELLS:
             raise ValueError(f"render light_buffer must be an integer in "
@@ -193,9 +221,18 @@ class RenderSettings:
 
 def bytes_per_ray_slot(settings: RenderSettings) -> int:
     """:data:`BYTES_PER_RAY_SLOT` plus, with ``overlap_levels``, a second hit record (two levels'
-    hits live at once) and, with ``fuse_trace_shade`` too, a second radiance."""
+    hits live at once) and, with ``fuse_trace_shade`` too, a second radiance; with
+    ``shadow_list``, the list's entries instead."""
     s = settings
+    if s.shadow_list:
+        return BYTES_PER_RAY_SLOT + math.ceil(SHADOW_RAY.itemsize * s.shadow_list_room * 9 / 8)
     return BYTES_PER_RAY_SLOT + s.overlap_levels * (HIT_DTYPE.itemsize + 16 * s.fuse_trace_shade)
+
+
+def shadow_list_rooms(settings: RenderSettings, capacity: int) -> tuple[int, int]:
+    """The shadow list's main and full parts, in entries, for ``capacity`` ray slots."""
+    main = int(capacity * settings.shadow_list_room)
+    return main, main // 8
 
 
 #: ``coop_from`` on a GPU (binary BVH layout): depth 2, so that the launch of level 1's ~1M
@@ -236,6 +273,13 @@ def device_cost_bins(rt: Runtime) -> bool:
 
 #: ``light_buffer`` on a GPU: cells along a map's longer side.
 GPU_LIGHT_BUFFER = 1024
+
+
+def device_shadow_list(rt: Runtime) -> bool:
+    """``shadow_list`` on ``rt``'s device: on a GPU, where every level's shadow rays in one
+    launch take less than the per-level launches (BENCHMARKS.md, fourteenth session); off on a
+    CPU, which runs no launch latency to hide."""
+    return bool(rt.is_gpu)
 
 
 def device_light_buffer(rt: Runtime) -> int:
@@ -334,6 +378,13 @@ class Renderer:
         self.caustic_params = np.zeros(1, CAUSTIC_PARAMS)[0]
         # the directional lights' maps of what blocks them (raytrace.light_buffer)
         self.light_buffer = LightBuffer(rt, s.light_buffer)
+        # the shadow list (shadow_list): its counts (full part, main part, traced at once), its
+        # entries, and each pixel's fixed-point light (render_shadow_list.h); made when on
+        self.list_counts = rt.to_device(np.zeros(4, np.uint32))
+        self.shadow_list = self.shadow_light = None
+        self.k_shadow_list: Kernel | None = None
+        self._shadow_list_buffers()
+        self._listed_hint: int | None = None  # shadow rays listed in the last frame that arrived
         # this renderer's own kernels: raygen, and per depth level trace/shade/scan/gather
         self.k_raygen = rt.kernel_launcher("render_raygen.cl", "render_raygen",
                                            stage="render.raygen")
@@ -369,8 +420,10 @@ class Renderer:
             # the GatherParams (scatter, accumulate, q0, n_q, finish) of a level that scatters
             # and accumulates, of an accumulation alone (the last level; overlap_levels: every
             # level, after its shadow rays), of the tonemap pass, and of a scatter alone
+            # (and of the tonemap pass that adds the shadow list's light first)
             gather = tuple(np.array([(sc, acc, q0, nq, fin)], GATHER_PARAMS)[0]
-                           for sc, acc, fin in ((1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 0)))
+                           for sc, acc, fin in ((1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 0),
+                                                (0, 0, GATHER_FINISH_SHADOW_LIST)))
             self._plan.append((raygen, gather, (max(n_rays, STATS_LEN),), depths))
 
     def _launch_sizes(self, depths: list, hint: tuple | None) -> tuple:
@@ -399,8 +452,41 @@ class Renderer:
     def _check_fits(self, s: RenderSettings) -> None:
         """One-line DeviceLimitError when the ray slots and per-pixel buffers do not fit."""
         check_fits(self.rt, self.capacity * bytes_per_ray_slot(s)
-                   + self.n_pixels * (20 + s.aov * AOV.itemsize),
+                   + self.n_pixels * (20 + s.aov * AOV.itemsize) + s.shadow_list * 24 * self.n_q,
                    f"render {s.width}x{s.height}", largest=16 * self.n_pixels)
+
+    def _shadow_list_buffers(self) -> None:
+        """With ``shadow_list``, the list (its main part, then the part for full light-buffer
+        cells) and 24 bytes of fixed-point light per tile-order pixel, zeroed (the tonemap pass
+        leaves them zero); without, a pixel's worth that the gather kernels bind."""
+        s, rt = self.settings, self.rt
+        if not s.shadow_list:
+            if self.shadow_light is None:
+                self.shadow_light = rt.to_device(np.zeros(3, np.uint64))
+            return
+        main, full = shadow_list_rooms(s, self.capacity)
+        self.list_params = np.array([(main, full, 0, 0)], SHADOW_LIST_PARAMS)[0]
+        if self.shadow_list is None or self.shadow_list.size < (main + full) * SHADOW_RAY.itemsize:
+            self.shadow_list = rt.buffer(max(1, main + full) * SHADOW_RAY.itemsize)
+        if self.shadow_light is None or self.shadow_light.size < 24 * self.n_q:
+            self.shadow_light = rt.to_device(np.zeros(3 * self.n_q, np.uint64))
+        self._bound_sig = None
+
+    def set_shadow_list(self, on: bool, room: float | None = None) -> None:
+        """Trace every level's shadow rays as one list (``shadow_list``) from the next frame
+        on, with ``room`` entries per ray slot (None: keep ``shadow_list_room``); an A/B switch
+        (bench frame --shadow-list). The image differs from the per-level stage's by float
+        rounding only."""
+        room = self.settings.shadow_list_room if room is None else room
+        new = dataclasses.replace(self.settings, shadow_list=bool(on),
+                                  shadow_list_room=room).resolved()
+        if new == self.settings:
+            return
+        self._check_fits(new)
+        self.settings = new
+        self._shadow_list_buffers()
+        self._level_buffers()
+        self._bound_sig = None
 
     def _level_buffers(self) -> None:
         """With ``overlap_levels``, the odd levels' hits (and, fused, radiance) in buffers of
@@ -409,7 +495,7 @@ class Renderer:
         radiance after it. Unfused, render.shade of level d + 1 runs after that accumulation on
         the in-order queue, so one radiance buffer serves both parities."""
         s = self.settings
-        if not s.overlap_levels:
+        if not s.overlaps:
             return
         cap = self.capacity
         if self.hits[1] is self.hits[0]:
@@ -500,7 +586,18 @@ class Renderer:
             self._k.append(ks)
             self._bound_sig = None
         s = self.settings
-        if s.overlap_levels:   # level d's shadow rays with level d + 1's trace
+        if s.shadow_list:   # the shading that writes the list, the launch that traces it
+            for d, ks in enumerate(self._k):
+                if "shade_list" not in ks:
+                    ks["shade_list"] = rt.kernel_launcher(
+                        "render_shadow_list.cl", "render_shade_list",
+                        stage=self._stage_name("render.shade", d))
+                    self._bound_sig = None
+            if self.k_shadow_list is None:
+                self.k_shadow_list = rt.kernel_launcher(
+                    "render_shadow_list.cl", "render_shadow_list", stage="render.shadow")
+                self._bound_sig = None
+        if s.overlaps:   # level d's shadow rays with level d + 1's trace
             for d, ks in enumerate(self._k[1:], 1):
                 if "shadow_trace" not in ks:
                     ks["shadow_trace"] = rt.kernel_launcher(
@@ -535,7 +632,7 @@ class Renderer:
                      defines: dict | None = None) -> None:
         """Level ``d``'s ``suffix`` flavour of ``kernels`` (and of the combined launches where
         the level has them) in ``ks``, made once, timed under the plain kernel's stage."""
-        if d > 0 and self.settings.overlap_levels:
+        if d > 0 and self.settings.overlaps:
             kernels = kernels + self._SHADOW_TRACE
         for key, source, name in kernels:
             if key + suffix not in ks:
@@ -553,7 +650,8 @@ class Renderer:
         scene = self.scene.scene.trace_bindings()
         geom = self.scene.shade_bindings()
         lbuf = self.light_buffer.bindings()
-        bufs = (*scene.values(), *geom.values(), self.scene.light_buf, *lbuf.values())
+        bufs = (*scene.values(), *geom.values(), self.scene.light_buf, *lbuf.values(),
+                self.shadow_list, self.shadow_light)
         self._depth_kernels(levels)
         old = self._bound_sig
         if old is not None and len(old) == len(bufs) and all(
@@ -561,8 +659,13 @@ class Renderer:
             return
         s = self.settings
         self.k_raygen.bind(cam=self.camera_buf, rays=self.rays[0], counts=self.counts,
-                           stats=self.stats)
+                           stats=self.stats, list_counts=self.list_counts)
         shading = {**geom, "prm": self.params_buf}
+        listing = {}
+        if s.shadow_list:
+            listing = {"shadow_list": self.shadow_list, "list_counts": self.list_counts,
+                       "lp": self.list_params, "shadow_light": self.shadow_light}
+            self.k_shadow_list.bind(**scene, **shading, **lbuf, **listing, stats=self.stats)
         for d, k in enumerate(self._k):
             wave = {"rays": self.rays[d % 2], "counts": self.counts, "depth": d}
             hits, radiance = self.hits[d % 2], self.radiance[d % 2]
@@ -574,6 +677,9 @@ class Renderer:
                                   hits=hits, **out)
             light = {"lights": self.scene.light_buf, "caustic_map": self.caustic_map,
                      "cprm": self.caustic_params, **lbuf}
+            if "shade_list" in k and s.shadow_list:
+                k["shade_list"].bind(**scene, **shading, cam=self.camera_buf, **wave, hits=hits,
+                                     **out, **light, **listing)
             for f in ("", "_binned"):   # the binned flavour: the plain kernel's arguments
                 if "shadow" + f in k:
                     k["shadow" + f].bind(**scene, **shading, **light, **wave, hits=hits,
@@ -609,7 +715,7 @@ class Renderer:
                 g.bind(**shading, cam=self.camera_buf, **wave, hits=hits,
                        child_offsets=self.child, block_sums=self.block_sums,
                        out=self.rays[(d + 1) % 2], radiance=radiance,
-                       fb=self.framebuffer, rgba=self.rgba)
+                       fb=self.framebuffer, rgba=self.rgba, shadow_light=self.shadow_light)
         self._bound_sig = bufs
         self._bind_version += 1
 
@@ -704,17 +810,30 @@ class Renderer:
         bins = tuple(s.cost_bins and d >= 1 and (hint is None or d >= len(hint)
                                                  or hint[d] >= BIN_MIN_RAYS)
                      for d in range(deepest + 1))
+        list_size = self._list_size() if s.shadow_list else None
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
-               s.overlap_levels, s.overlap_from, few, bins, self._bind_version)
+               s.overlap_levels, s.overlap_from, few, bins, self._bind_version, s.shadow_list,
+               list_size)
         ops = self._plans.get(key)
         if ops is None:
             if len(self._plans) >= 16:
                 self._plans.clear()
-            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few, bins)
+            ops = self._plans[key] = self._make_plan(sizes, deepest, key[2], few, bins,
+                                                     list_size)
         self._run(ops, rebind=len(self._plan) > 1 or ops is not self._last_ops)
         self._last_ops = ops
         if read_stats:
             self.use_stats_handle(self.enqueue_read_stats())
+
+    def _list_size(self) -> tuple:
+        """render_shadow_list's work-items: 5/4 of the rays the last frame that arrived listed
+        (at least :data:`LAUNCH_FLOOR`), else the list's room (any size is correct)."""
+        ls = self.settings.local_size
+        room = int(self.list_params["main_room"]) + int(self.list_params["full_room"])
+        n = room
+        if self._listed_hint is not None and len(self._plan) == 1 and self.settings.size_hints:
+            n = min(room, max(self._listed_hint * 5 // 4 + ls, LAUNCH_FLOOR))
+        return (max(ls, -(-n // ls) * ls),)
 
     def use_stats_handle(self, handle: ReadHandle) -> None:
         """Size the next frames' launches from the ray counts ``handle`` reads (after a frame
@@ -729,12 +848,13 @@ class Renderer:
     _LAUNCH, _BIND, _FLUSH = 0, 1, 2
 
     def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool, few: tuple,
-                   bins: tuple) -> list:
+                   bins: tuple, list_size: tuple | None = None) -> list:
         """The frame's launches in order, sizes and arguments decided: what the per-frame loop
         did, made once per (sizes, depth, lights, stage names, levels of few rays, binned
-        levels, bindings). ``few[d]``: where level d's rays go one per work-group, the power of
-        two at or above its last ray count (its work-groups), else None; ``bins[d]``: level d's
-        shadow rays go through the binned kernels."""
+        levels, bindings, shadow list). ``few[d]``: where level d's rays go one per work-group,
+        the power of two at or above its last ray count (its work-groups), else None;
+        ``bins[d]``: level d's shadow rays go through the binned kernels; ``list_size``: with
+        ``shadow_list``, render_shadow_list's work-items."""
         s, ks = self.settings, self._k
         ls, scan_ls = (s.local_size,), (SCAN_WG,)
         ops = []
@@ -748,10 +868,10 @@ class Renderer:
             k.bind(**values)
             ops.append((self._BIND, k, values))
 
-        trace = "trace_shade" if s.fuse_trace_shade else "trace"
+        trace = "trace_shade" if s.fuses else "trace"
 
         def overlapped(d: int) -> bool:   # level d's shadow rays go with level d + 1's trace
-            return s.overlap_levels and s.overlap_from <= d < deepest
+            return s.overlaps and s.overlap_from <= d < deepest
 
         def coop(d: int) -> bool:   # level d's rays go one per work-group (the hits are the
             return few[d] is not None   # same either way)
@@ -769,10 +889,27 @@ class Renderer:
             else:
                 launch(k[name], size, ls)
 
-        for (rp, (g_both, g_accumulate, g_finish, g_scatter), raygen_size, _), sz in zip(
-                self._plan, sizes, strict=True):
+        listed = s.shadow_list and has_lights
+        for (rp, (g_both, g_accumulate, g_finish, g_scatter, g_finish_list), raygen_size, _), \
+                sz in zip(self._plan, sizes, strict=True):
             bind(self.k_raygen, rp=rp)
             launch(self.k_raygen, raygen_size, None)
+            if listed:   # the shading lists every level's shadow rays, one launch traces them
+                for depth in range(deepest + 1):
+                    k = ks[depth]
+                    ray_size, scan_size, scatter_size, pixel_size = sz[depth]
+                    per_ray(k, "trace", depth, ray_size)
+                    if depth == 0 and rp["zero_stats"]:
+                        ops.append((self._FLUSH,))
+                    launch(k["shade_list"], ray_size, ls)
+                    if depth < deepest:
+                        launch(k["scan"], scan_size, scan_ls)
+                    bind(k["gather"], gp=g_both if depth < deepest else g_accumulate)
+                    launch(k["gather"], scatter_size, ls)
+                launch(self.k_shadow_list, list_size, ls)
+                bind(ks[deepest]["finish"], gp=g_finish_list)
+                launch(ks[deepest]["finish"], sz[deepest][3], ls)
+                continue
             for depth in range(deepest + 1):
                 k = ks[depth]
                 ray_size, scan_size, scatter_size, pixel_size = sz[depth]
@@ -780,7 +917,7 @@ class Renderer:
                     per_ray(k, trace, depth, ray_size)
                     if depth == 0 and rp["zero_stats"]:
                         ops.append((self._FLUSH,))  # the device starts while the rest is queued
-                    if not s.fuse_trace_shade:
+                    if not s.fuses:
                         launch(k["shade"], ray_size, ls)
                 if not overlapped(depth):
                     if has_lights:
@@ -822,7 +959,7 @@ class Renderer:
                     per_ray(nxt, trace, depth + 1, next_size)
                 bind(k["gather"], gp=g_accumulate)
                 launch(k["gather"], scatter_size, ls)
-                if not s.fuse_trace_shade:
+                if not s.fuses:
                     launch(nxt["shade"], next_size, ls)
         return ops
 
@@ -849,9 +986,9 @@ class Renderer:
                 old[2] == self._bind_version:
             return
         for k in self._k:
-            for name in ("shadow", "shadow_trace", "shadow_trace_shade", "shadow_coop",
-                         "shadow_trace_coop", "shadow_trace_shade_coop", "shadow_binned",
-                         "shadow_trace_binned", "shadow_trace_shade_binned"):
+            for name in ("shade_list", "shadow", "shadow_trace", "shadow_trace_shade",
+                         "shadow_coop", "shadow_trace_coop", "shadow_trace_shade_coop",
+                         "shadow_binned", "shadow_trace_binned", "shadow_trace_shade_binned"):
                 if name in k:
                     k[name].bind(caustic_map=cmap, cprm=self.caustic_params)
         self._caustic_bound = (cmap, cprm, self._bind_version)
@@ -863,6 +1000,7 @@ class Renderer:
             return self._last_hint
         st = h.array
         self._last_hint = tuple(st[: self.settings.bounces + 1].tolist()) if h.valid else None
+        self._listed_hint = int(st[STAT_SHADOW_LISTED]) if h.valid else None
         return self._last_hint
 
     @property
@@ -918,7 +1056,9 @@ class Renderer:
         if L == 0 and not self.scene.has_secondary:  # no scan ran: the chunks' primary rays
             per_depth = [sum(nq * self.settings.spp for _, nq in self.chunks)]
         return {"rays_per_depth": per_depth, "dropped": int(st[STAT_DROPPED]),
-                "secondary_rays": int(sum(per_depth[1:])), "levels": L}
+                "secondary_rays": int(sum(per_depth[1:])), "levels": L,
+                "shadow_rays_listed": int(st[STAT_SHADOW_LISTED]),
+                "shadow_rays_at_once": int(st[STAT_SHADOW_AT_ONCE])}
 
     # -- outputs (each one synchronises) ------------------------------------------------------
     def read_rgba(self) -> np.ndarray:

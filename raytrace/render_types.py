@@ -13,7 +13,11 @@ from kernels.errors import InputError
 MAX_LIGHTS = 8
 MAX_DEPTH = 32
 STAT_DROPPED = MAX_DEPTH + 1
-STATS_LEN = MAX_DEPTH + 2
+STAT_SHADOW_LISTED = MAX_DEPTH + 2
+STAT_SHADOW_AT_ONCE = MAX_DEPTH + 3
+STATS_LEN = MAX_DEPTH + 4
+SHADOW_RAY_LIGHT_SHIFT = 28
+GATHER_FINISH_SHADOW_LIST = 2
 SCAN_BLOCK = 1024
 SCAN_WG = 256
 TILE = 8
@@ -72,6 +76,11 @@ RAY = np.dtype([("ox", np.float32), ("oy", np.float32), ("oz", np.float32), ("pi
                 ("dx", np.float32), ("dy", np.float32), ("dz", np.float32), ("medium", np.int32),
                 ("wr", np.float32), ("wg", np.float32), ("wb", np.float32), ("sample", np.uint32)])
 
+SHADOW_RAY = np.dtype([("ox", np.float32), ("oy", np.float32), ("oz", np.float32),
+                       ("pixel_light", np.uint32), ("dx", np.float32), ("dy", np.float32),
+                       ("dz", np.float32), ("medium", np.int32), ("cr", np.float32),
+                       ("cg", np.float32), ("cb", np.float32), ("tmax", np.float32)])
+
 CAMERA = np.dtype([("origin", f4), ("right", f4), ("up", f4), ("forward", f4),
                    ("width", np.uint32), ("height", np.uint32), ("spp", np.uint32),
                    ("pattern", np.uint32), ("order", np.uint32), ("tiles_x", np.uint32),
@@ -106,11 +115,14 @@ RENDERPARAMS = np.dtype([("ambient", f4), ("sky_zenith", f4), ("sky_horizon", f4
 AOV = np.dtype([("normal", f4), ("depth", np.float32), ("prim", np.int32), ("inst", np.int32),
                 ("material", np.int32)])
 
-#: render_raygen's and render_gather's per-launch values (by value, 16 and 20 bytes).
+#: render_raygen's, render_gather's and the shadow list's per-launch values (by value, 16, 20
+#: and 16 bytes).
 RAYGEN_PARAMS = np.dtype([("q0", np.uint32), ("n_rays", np.uint32), ("zero_stats", np.uint32),
                           ("pad", np.uint32)])
 GATHER_PARAMS = np.dtype([("scatter", np.uint32), ("accumulate", np.uint32), ("q0", np.uint32),
                           ("n_q", np.uint32), ("finish", np.uint32)])
+SHADOW_LIST_PARAMS = np.dtype([("main_room", np.uint32), ("full_room", np.uint32),
+                               ("pad0", np.uint32), ("pad1", np.uint32)])
 
 #: Instance visibility bits (kernels/render_types.h): all opaque, or holding a dielectric.
 MASK_OPAQUE = 1
@@ -123,6 +135,8 @@ MESH_DYNAMIC = 8
 #: (header, struct name, dtype) for every device struct of the renderer.
 STRUCTS = [
     ("render_types.h", "Ray", RAY),
+    ("render_types.h", "ShadowRay", SHADOW_RAY),
+    ("render_types.h", "ShadowListParams", SHADOW_LIST_PARAMS),
     ("render_types.h", "Camera", CAMERA),
     ("render_types.h", "Material", MATERIAL),
     ("render_types.h", "Light", LIGHT),

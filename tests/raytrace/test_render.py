@@ -309,7 +309,7 @@ def test_scan_kernel_offsets_counts_and_stats(rt, n):
     """render_scan in one launch: exclusive offsets (block offset + offset in block) equal
     NumPy's cumulative sum, the total becomes the next count and the stats, the ticket is 0."""
 
-    from raytrace.render_types import SCAN_BLOCK, SCAN_WG, STATS_LEN
+    from raytrace.render_types import SCAN_BLOCK, SCAN_WG, STAT_DROPPED, STATS_LEN
 
     k = rt.kernel_launcher("render_secondary.cl", "render_scan", stage="test.scan")
     cc = np.random.default_rng(n).integers(0, 3, max(n, 1)).astype(np.uint32)
@@ -329,7 +329,7 @@ def test_scan_kernel_offsets_counts_and_stats(rt, n):
     kept = max(total - 3, 0)
     assert rt.to_host(counts, np.uint32, 3)[1] == kept
     st = rt.to_host(stats, np.uint32, STATS_LEN)
-    assert (st[0], st[1], st[-1]) == (n, kept, total - kept)
+    assert (st[0], st[1], st[STAT_DROPPED]) == (n, kept, total - kept)
     assert rt.to_host(ticket, np.uint32, 1)[0] == 0
 
 

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-04 (fourteenth session)" rows.
+# Usage: bench/h200_session14.sh OUTDIR PART
+# PART list: the shadow list (RenderSettings.shadow_list: every level's shadow rays written by
+#   the shading to one list, traced in one launch after the last level) against the per-level
+#   shadow launches, on the baseline scene at 1920x1080 per depth (--per-depth; off: with
+#   --no-overlap, so that each level's shadow rays have a stage of their own) and whole, in
+#   turns twice; at 3840x2160 whole; and the pool (its boat floats) whole.
+# PART tests: the device tests of the shadow list and of the renderer's shadow stages.
+# The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+set -uo pipefail
+out=${1:?OUTDIR}
+part=${2:?PART}
+mkdir -p "$out"
+source "$(dirname "$0")/h200_lib.sh"
+case $part in
+list)
+    for rep in 1 2; do
+        for l in on off; do
+            o=""
+            [ $l = off ] && o="--no-overlap"
+            lb bench frame $f $static --per-depth $o --shadow-list $l \
+                --out "$out/static_pd_list${l}_$rep" | tail -1
+            lb bench frame $f $static --shadow-list $l --out "$out/static_list${l}_$rep" | tail -1
+        done
+    done
+    for l in on off; do
+        lb bench frame $k $static --shadow-list $l --out "$out/static4k_list$l" | tail -1
+        lb bench frame $f --shadow-list $l --out "$out/pool_list$l" | tail -1
+    done
+    ;;
+tests)
+    python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_shadow_list.py \
+        tests/raytrace/test_render_shadow.py tests/raytrace/test_light_buffer.py 2>&1 | tail -5
+    ;;
+*)
+    echo "unknown PART $part" >&2
+    exit 2
+    ;;
+esac
