@@ -6,6 +6,11 @@
 #   shadow launches, on the baseline scene at 1920x1080 per depth (--per-depth; off: with
 #   --no-overlap, so that each level's shadow rays have a stage of their own) and whole, in
 #   turns twice; at 3840x2160 whole; and the pool (its boat floats) whole.
+# PART fallback: what the shadow list's shading pays for tracing a ray that finds no room itself
+#   (out of line), on the baseline scene per depth at 1920x1080: the tree against a copy whose
+#   shading leaves that walk out (nofb: an overflowing list would lose rays; none overflows
+#   here), in turns twice, and the per-level stage beside them; then the tree whole at 1920x1080
+#   and 3840x2160 with the list on and off.
 # PART tests: the device tests of the shadow list and of the renderer's shadow stages.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
@@ -27,6 +32,21 @@ list)
     for l in on off; do
         lb bench frame $k $static --shadow-list $l --out "$out/static4k_list$l" | tail -1
         lb bench frame $f --shadow-list $l --out "$out/pool_list$l" | tail -1
+    done
+    ;;
+fallback)
+    variant_tree /tmp/nofb 's/if (in_full || slot < lp.main_room) {/if (1) {/' \
+        kernels/render_shadow_list.cl
+    for rep in 1 2; do
+        lb bench frame $f $static --per-depth --shadow-list on --out "$out/pd_list_$rep" | tail -1
+        in_tree /tmp/nofb bench frame $f $static --per-depth --shadow-list on \
+            --out "$out/pd_nofb_$rep" | tail -1
+    done
+    lb bench frame $f $static --per-depth --no-overlap --shadow-list off \
+        --out "$out/pd_off" | tail -1
+    for l in on off; do
+        lb bench frame $f $static --shadow-list $l --out "$out/static_list$l" | tail -1
+        lb bench frame $k $static --shadow-list $l --out "$out/static4k_list$l" | tail -1
     done
     ;;
 tests)

@@ -23,6 +23,16 @@
 #include "render_shadow.h"
 #include "render_shadow_list.h"
 
+/* A shadow ray with no room in the list, traced by the shading: out of line on a GPU, so that
+ * the walk's registers do not weigh on every shading work-item (SHADOW_WALK, render_shadow.h). */
+SHADOW_WALK float3 shadow_at_once(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
+                                  __constant const RenderParams* prm, uint light, float3 org,
+                                  float3 dir, float tmax, int medium)
+{
+    return shadow_transmittance(TRACE_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, light, org,
+                                dir, tmax, medium);
+}
+
 /* Classes of a shadow-list entry within a work-group: the full part, then the main part's
    crossing and other rays. */
 #define LIST_FULL 0u
@@ -59,7 +69,7 @@ __kernel void render_shade_list(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                 const CausticParams cprm, LIGHT_BUFFER_PARAMS,
                                 __global ShadowRay* restrict shadow_list,
                                 __global uint* restrict list_counts, const ShadowListParams lp,
-                                __global ulong* restrict shadow_light)
+                                __global ulong4* restrict shadow_light)
 {
     __local uint group_count[3], group_base[2], group_full;
     const uint n = counts[depth], lid = get_local_id(0);
@@ -115,9 +125,9 @@ __kernel void render_shade_list(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                 if (in_full || slot < lp.main_room) {
                     shadow_list[slot] = shadow_entry(&o, q, l, ldir, dist, c);
                 } else {   /* no room: traced here, the same answer */
-                    const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS,
-                                                          LIGHT_BUFFER_ARGS, prm, l, o.org,
-                                                          ldir, dist, o.medium);
+                    const float3 T = shadow_at_once(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS,
+                                                    LIGHT_BUFFER_ARGS, prm, l, o.org, ldir,
+                                                    dist, o.medium);
                     if (max3(T) > 0.0f) shadow_light_add(shadow_light, q, T * c);
                     atomic_inc(&list_counts[2]);
                 }
@@ -133,7 +143,7 @@ __kernel void render_shadow_list(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_
                                  __constant const RenderParams* prm,
                                  __global const ShadowRay* restrict shadow_list,
                                  __global const uint* restrict list_counts,
-                                 const ShadowListParams lp, __global ulong* restrict shadow_light,
+                                 const ShadowListParams lp, __global ulong4* restrict shadow_light,
                                  __global uint* restrict stats)
 {
     const uint n_full = min(list_counts[0], lp.full_room);

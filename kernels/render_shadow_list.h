@@ -1,5 +1,6 @@
 /* The shadow list's light of each pixel (render_shadow_list.cl): three sums in 64-bit fixed
- * point, 32 bits of them fraction, that the list's shadow rays add to with atomics. Integer sums
+ * point, 32 bits of them fraction, in a 32-byte record per pixel (one vector load and store a
+ * work-item: a warp's records are one contiguous span), that the list's shadow rays add to with atomics. Integer sums
  * are the same in any order, so a pixel's light does not depend on which work-item adds first,
  * nor on whether a ray was listed or traced at once; the tonemap pass (render_frame.cl) takes
  * the sum into the framebuffer and zeroes it for the next frame. */
@@ -14,22 +15,22 @@
 /* One ray's share at most (linear radiance): sums of up to 2^20 of them stay below 2^64. */
 #define SHADOW_LIGHT_MAX 4096.0f
 
-inline void shadow_light_add(__global ulong* restrict light, uint q, float3 c)
+inline void shadow_light_add(__global ulong4* restrict light, uint q, float3 c)
 {
     const float3 f = clamp(c, 0.0f, SHADOW_LIGHT_MAX) * SHADOW_LIGHT_ONE;
-    __global ulong* p = light + 3u * q;
+    __global ulong* p = (__global ulong*)(light + q);
     if (f.x >= 0.5f) atom_add(p, convert_ulong_rte(f.x));
     if (f.y >= 0.5f) atom_add(p + 1, convert_ulong_rte(f.y));
     if (f.z >= 0.5f) atom_add(p + 2, convert_ulong_rte(f.z));
 }
 
 /* Pixel q's sum as linear radiance, left zero. */
-inline float3 shadow_light_take(__global ulong* restrict light, uint q)
+inline float3 shadow_light_take(__global ulong4* restrict light, uint q)
 {
-    __global ulong* p = light + 3u * q;
-    const float3 c = (float3)(convert_float(p[0]), convert_float(p[1]), convert_float(p[2]));
-    p[0] = p[1] = p[2] = 0ul;
-    return c * (1.0f / SHADOW_LIGHT_ONE);
+    const ulong4 s = light[q];
+    light[q] = (ulong4)(0ul);
+    return (float3)(convert_float(s.x), convert_float(s.y), convert_float(s.z))
+           * (1.0f / SHADOW_LIGHT_ONE);
 }
 
 #endif

@@ -452,24 +452,24 @@ class Renderer:
     def _check_fits(self, s: RenderSettings) -> None:
         """One-line DeviceLimitError when the ray slots and per-pixel buffers do not fit."""
         check_fits(self.rt, self.capacity * bytes_per_ray_slot(s)
-                   + self.n_pixels * (20 + s.aov * AOV.itemsize) + s.shadow_list * 24 * self.n_q,
+                   + self.n_pixels * (20 + s.aov * AOV.itemsize) + s.shadow_list * 32 * self.n_q,
                    f"render {s.width}x{s.height}", largest=16 * self.n_pixels)
 
     def _shadow_list_buffers(self) -> None:
         """With ``shadow_list``, the list (its main part, then the part for full light-buffer
-        cells) and 24 bytes of fixed-point light per tile-order pixel, zeroed (the tonemap pass
+        cells) and 32 bytes of fixed-point light per tile-order pixel, zeroed (the tonemap pass
         leaves them zero); without, a pixel's worth that the gather kernels bind."""
         s, rt = self.settings, self.rt
         if not s.shadow_list:
             if self.shadow_light is None:
-                self.shadow_light = rt.to_device(np.zeros(3, np.uint64))
+                self.shadow_light = rt.to_device(np.zeros(4, np.uint64))
             return
         main, full = shadow_list_rooms(s, self.capacity)
         self.list_params = np.array([(main, full, 0, 0)], SHADOW_LIST_PARAMS)[0]
         if self.shadow_list is None or self.shadow_list.size < (main + full) * SHADOW_RAY.itemsize:
             self.shadow_list = rt.buffer(max(1, main + full) * SHADOW_RAY.itemsize)
-        if self.shadow_light is None or self.shadow_light.size < 24 * self.n_q:
-            self.shadow_light = rt.to_device(np.zeros(3 * self.n_q, np.uint64))
+        if self.shadow_light is None or self.shadow_light.size < 32 * self.n_q:
+            self.shadow_light = rt.to_device(np.zeros(4 * self.n_q, np.uint64))
         self._bound_sig = None
 
     def set_shadow_list(self, on: bool, room: float | None = None) -> None:

@@ -200,7 +200,7 @@ def test_memory_and_settings(rt):
     r = Renderer(rt, build(rt, 1), dataclasses.replace(s, width=16, height=8))
     main, full = shadow_list_rooms(r.settings, r.capacity)
     assert r.shadow_list.size == (main + full) * SHADOW_RAY.itemsize
-    assert r.shadow_light.size == 24 * r.n_q
+    assert r.shadow_light.size == 32 * r.n_q
 
 
 def test_header_constants_mirror_python():
