@@ -11,6 +11,10 @@
 #   shading leaves that walk out (nofb: an overflowing list would lose rays; none overflows
 #   here), in turns twice, and the per-level stage beside them; then the tree whole at 1920x1080
 #   and 3840x2160 with the list on and off.
+# PART finish: what the tonemap pass pays for taking each pixel's shadow-list light: copies of
+#   the tree with no fallback walk (as nofb) whose tonemap pass reads the light without zeroing
+#   it (noclear: the light adds up frame after frame, a wrong image) or never reads it (notake:
+#   no shadowed light at all), per depth at 1920x1080 against nofb, in turns twice.
 # PART tests: the device tests of the shadow list and of the renderer's shadow stages.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
@@ -47,6 +51,21 @@ fallback)
     for l in on off; do
         lb bench frame $f $static --shadow-list $l --out "$out/static_list$l" | tail -1
         lb bench frame $k $static --shadow-list $l --out "$out/static4k_list$l" | tail -1
+    done
+    ;;
+finish)
+    nofb='s/if (in_full || slot < lp.main_room) {/if (1) {/'
+    variant_tree /tmp/nofb "$nofb" kernels/render_shadow_list.cl
+    variant_tree /tmp/noclear "$nofb" kernels/render_shadow_list.cl \
+        's/    light\[q\] = (ulong4)(0ul);//' kernels/render_shadow_list.h
+    variant_tree /tmp/notake "$nofb" kernels/render_shadow_list.cl \
+        's/const bool listed = gp.finish == GATHER_FINISH_SHADOW_LIST;/const bool listed = false;/' \
+        kernels/render_frame.cl
+    for rep in 1 2; do
+        for v in nofb noclear notake; do
+            in_tree /tmp/$v bench frame $f $static --per-depth --shadow-list on \
+                --out "$out/pd_${v}_$rep" | tail -1
+        done
     done
     ;;
 tests)
