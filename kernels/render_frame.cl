@@ -43,7 +43,7 @@ __kernel void render_gather(RENDER_GEOM_PARAMS, __constant const RenderParams* p
                             __global const uint* block_sums, __global Ray* out,
                             const GatherParams gp, __global const float4* radiance,
                             __global float4* fb, __global uchar4* rgba,
-                            __global ulong4* restrict shadow_light)
+                            __global const ulong4* restrict shadow_light)
 {
     const uint n = counts[depth];
     if (gp.finish) {
@@ -51,7 +51,7 @@ __kernel void render_gather(RENDER_GEOM_PARAMS, __constant const RenderParams* p
             uint x, y;
             const uint q = gp.q0 + k;
             const bool listed = gp.finish == GATHER_FINISH_SHADOW_LIST;
-            const float3 light = listed ? shadow_light_take(shadow_light, q) : (float3)(0.0f);
+            const float3 light = listed ? shadow_light_of(shadow_light, q) : (float3)(0.0f);
             if (!pixel_of(cam, q, &x, &y)) continue;
             const uint p = y * cam->width + x;
             float4 c = fb[p];

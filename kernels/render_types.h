@@ -47,12 +47,12 @@
 #define MESH_DYNAMIC 8u       /* positions/normals in the dynamic arrays (g_dpos, g_dnrm) */
 /* Depth limit and the stats buffer: stats[d] = rays traced at depth d over the frame,
  * stats[RENDER_STAT_DROPPED] = children dropped because the wavefront was full; with the shadow
- * list (render_shadow_list.cl), the shadow rays it traced and those traced at once for want of
- * room. */
+ * list (render_shadow_list.cl), the shadow rays it traced and those spilled for want of room
+ * (traced by their level's render_shadow_spill). */
 #define RENDER_MAX_DEPTH 32
 #define RENDER_STAT_DROPPED (RENDER_MAX_DEPTH + 1)
 #define RENDER_STAT_SHADOW_LISTED (RENDER_MAX_DEPTH + 2)
-#define RENDER_STAT_SHADOW_AT_ONCE (RENDER_MAX_DEPTH + 3)
+#define RENDER_STAT_SHADOW_SPILLED (RENDER_MAX_DEPTH + 3)
 #define RENDER_STATS_LEN (RENDER_MAX_DEPTH + 4)
 /* A shadow-list entry's pixel field: the tile-order pixel q (< 2^28: 16384^2 pixels) and, above
    it, the light's index (< RENDER_MAX_LIGHTS). */

@@ -99,8 +99,8 @@ from raytrace.render_types import (
     SHADOW_LIST_PARAMS,
     SHADOW_RAY,
     STAT_DROPPED,
-    STAT_SHADOW_AT_ONCE,
     STAT_SHADOW_LISTED,
+    STAT_SHADOW_SPILLED,
     STATS_LEN,
     TILE,
     FresnelMode,
@@ -167,7 +167,7 @@ class RenderSettings:
                                   #: stage's by float rounding only
     shadow_list_room: float = 0.5  #: the list's entries per ray slot (and an eighth more for
                                    #: rays in full light-buffer cells); a ray with no room is
-                                   #: traced at once by the shading (the same image)
+                                   #: spilled: traced by its level's own launch (the same image)
 
     @property
     def overlaps(self) -> bool:
@@ -378,7 +378,7 @@ class Renderer:
         self.caustic_params = np.zeros(1, CAUSTIC_PARAMS)[0]
         # the directional lights' maps of what blocks them (raytrace.light_buffer)
         self.light_buffer = LightBuffer(rt, s.light_buffer)
-        # the shadow list (shadow_list): its counts (full part, main part, traced at once), its
+        # the shadow list (shadow_list): its counts (full part, main part, spilled), its
         # entries, and each pixel's fixed-point light (render_shadow_list.h); made when on
         self.list_counts = rt.to_device(np.zeros(4, np.uint32))
         self.shadow_list = self.shadow_light = None
@@ -457,8 +457,8 @@ class Renderer:
 
     def _shadow_list_buffers(self) -> None:
         """With ``shadow_list``, the list (its main part, then the part for full light-buffer
-        cells) and 32 bytes of fixed-point light per tile-order pixel, zeroed (the tonemap pass
-        leaves them zero); without, a pixel's worth that the gather kernels bind."""
+        cells) and 32 bytes of fixed-point light per tile-order pixel (zeroed by each frame's
+        first step); without, a pixel's worth that the gather kernels bind."""
         s, rt = self.settings, self.rt
         if not s.shadow_list:
             if self.shadow_light is None:
@@ -592,6 +592,9 @@ class Renderer:
                     ks["shade_list"] = rt.kernel_launcher(
                         "render_shadow_list.cl", "render_shade_list",
                         stage=self._stage_name("render.shade", d))
+                    ks["shadow_spill"] = rt.kernel_launcher(
+                        "render_shadow_list.cl", "render_shadow_spill",
+                        stage=self._stage_name("render.shadow", d))
                     self._bound_sig = None
             if self.k_shadow_list is None:
                 self.k_shadow_list = rt.kernel_launcher(
@@ -680,6 +683,10 @@ class Renderer:
             if "shade_list" in k and s.shadow_list:
                 k["shade_list"].bind(**scene, **shading, cam=self.camera_buf, **wave, hits=hits,
                                      **out, **light, **listing)
+                k["shadow_spill"].bind(**scene, **shading, lights=self.scene.light_buf,
+                                       cprm=self.caustic_params, **lbuf, **wave, hits=hits,
+                                       radiance=radiance, list_counts=self.list_counts,
+                                       shadow_light=self.shadow_light)
             for f in ("", "_binned"):   # the binned flavour: the plain kernel's arguments
                 if "shadow" + f in k:
                     k["shadow" + f].bind(**scene, **shading, **light, **wave, hits=hits,
@@ -844,8 +851,10 @@ class Renderer:
         self._stats_handle = handle
 
     #: Plan steps: a launch (cl kernel, global size, local size, stage), arguments to bind
-    #: (Kernel, {name: value}; with one chunk only when the plan changes) and a flush.
-    _LAUNCH, _BIND, _FLUSH = 0, 1, 2
+    #: (Kernel, {name: value}; with one chunk only when the plan changes), a flush, and a fill
+    #: with zeros (buffer, bytes, stage).
+    _LAUNCH, _BIND, _FLUSH, _FILL = 0, 1, 2, 3
+    _ZERO = np.zeros(4, np.uint32)
 
     def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool, few: tuple,
                    bins: tuple, list_size: tuple | None = None) -> list:
@@ -890,6 +899,8 @@ class Renderer:
                 launch(k[name], size, ls)
 
         listed = s.shadow_list and has_lights
+        if listed:   # every pixel's shadow-list light starts the frame at zero
+            ops.append((self._FILL, self.shadow_light, 32 * self.n_q, "render.shadow"))
         for (rp, (g_both, g_accumulate, g_finish, g_scatter, g_finish_list), raygen_size, _), \
                 sz in zip(self._plan, sizes, strict=True):
             bind(self.k_raygen, rp=rp)
@@ -902,6 +913,8 @@ class Renderer:
                     if depth == 0 and rp["zero_stats"]:
                         ops.append((self._FLUSH,))
                     launch(k["shade_list"], ray_size, ls)
+                    # the rays with no room in the list, before this level's buffers go
+                    launch(k["shadow_spill"], (min(ray_size[0], LAUNCH_FLOOR),), ls)
                     if depth < deepest:
                         launch(k["scan"], scan_size, scan_ls)
                     bind(k["gather"], gp=g_both if depth < deepest else g_accumulate)
@@ -966,7 +979,7 @@ class Renderer:
     def _run(self, ops: list, rebind: bool) -> None:
         """Enqueue a plan: each launch one bare enqueue, its event recorded under its stage."""
         q, enqueue, record = self.rt.queue, cl.enqueue_nd_range_kernel, self.rt.timer.record
-        launch, bind = self._LAUNCH, self._BIND
+        launch, bind, fill = self._LAUNCH, self._BIND, self._FILL
         for op in ops:
             kind = op[0]
             if kind == launch:
@@ -974,6 +987,8 @@ class Renderer:
             elif kind == bind:
                 if rebind:
                     op[1].bind(**op[2])
+            elif kind == fill:
+                record(op[3], cl.enqueue_fill_buffer(q, op[1], self._ZERO, 0, op[2]))
             else:
                 q.flush()
 
@@ -986,6 +1001,8 @@ class Renderer:
                 old[2] == self._bind_version:
             return
         for k in self._k:
+            if "shadow_spill" in k:
+                k["shadow_spill"].bind(cprm=self.caustic_params)
             for name in ("shade_list", "shadow", "shadow_trace", "shadow_trace_shade",
                          "shadow_coop", "shadow_trace_coop", "shadow_trace_shade_coop",
                          "shadow_binned", "shadow_trace_binned", "shadow_trace_shade_binned"):
@@ -1058,7 +1075,7 @@ class Renderer:
         return {"rays_per_depth": per_depth, "dropped": int(st[STAT_DROPPED]),
                 "secondary_rays": int(sum(per_depth[1:])), "levels": L,
                 "shadow_rays_listed": int(st[STAT_SHADOW_LISTED]),
-                "shadow_rays_at_once": int(st[STAT_SHADOW_AT_ONCE])}
+                "shadow_rays_spilled": int(st[STAT_SHADOW_SPILLED])}
 
     # -- outputs (each one synchronises) ------------------------------------------------------
     def read_rgba(self) -> np.ndarray:

@@ -51,7 +51,7 @@ class _Spy:
 
 
 @pytest.mark.parametrize("upload", ["pbo", "direct"])
-def test_upload_hands_the_callers_array_to_gl_and_consumes_it_at_once(ctx, upload):
+def test_upload_hands_the_callers_array_to_gl_and_consumes_it_spilled(ctx, upload):
     """No per-frame copy in Python: GL is handed the caller's array itself (the pinned
     read-back buffer in the window), and the texture holds its exact bytes even after the
     caller reuses the array (the next frame's read) right after upload returns; the pbo path
