@@ -33,6 +33,16 @@ to overlap only the tail levels of few rays. The levels' hits live in two buffer
 radiance too; unfused, level d + 1's shade runs after level d's accumulation on the in-order
 queue and one radiance buffer serves.
 
+``shadow_list`` (``device_shadow_list``: on a GPU) replaces every level's shadow launch with
+one after the last level (``kernels/render_shadow_list.cl``): the shading lists its shadow rays
+(render.shade), a ray with no room spills to its level's own launch (render.shadow, returning
+at once when none did), and the list's launch (render.shadow) adds each traced ray's light to
+its pixel in fixed point, which the tonemap pass adds to the framebuffer:
+
+    render.raygen, a fill that zeroes the pixels' shadow light (render.shadow)
+    per depth: trace, shade (and list), spill, scan, gather
+    render.shadow (the list), tonemap
+
 ``coop_from`` D (None: off; ``device_coop_from``: 2 on a GPU) lets the trace and shadow rays
 of the levels from D on be traversed one per work-group of 32 (``kernels/traverse_coop.h``,
 the ``*_coop`` kernels of a ``TRACE_COOP=1`` build, about one group per ray): a tail level of
@@ -277,8 +287,8 @@ GPU_LIGHT_BUFFER = 1024
 
 def device_shadow_list(rt: Runtime) -> bool:
     """``shadow_list`` on ``rt``'s device: on a GPU, where every level's shadow rays in one
-    launch take less than the per-level launches (BENCHMARKS.md, fourteenth session); off on a
-    CPU, which runs no launch latency to hide."""
+    launch took the baseline frame from 2.04-2.07 to 1.97-1.99 kernel ms on the H200; off on a
+    CPU, where PoCL's frames took the same either way (BENCHMARKS.md, fourteenth session)."""
     return bool(rt.is_gpu)
 
 
