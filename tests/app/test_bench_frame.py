@@ -106,3 +106,22 @@ def test_bench_frame_light_buffer_is_recorded_and_checked(tmp_path, capsys):
     assert main(["bench", "frame", "--light-buffer", "-1", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "--light-buffer -1 is out of range; allowed [0, 8192]" in err and "\n" not in err
+
+
+def test_bench_frame_shadow_list_is_recorded(tmp_path, capsys):
+    """--shadow-list on traces every level's shadow rays in one launch: one render.shadow
+    stage and no render.shadow_trace; off (the CPU's default) launches them per level."""
+    rows = {}
+    for flag in ("on", "off"):
+        out = tmp_path / flag
+        assert main(["bench", "frame", "--cells", "32", "--size", "48", "32", "--frames", "2",
+                     "--warmup", "1", "--frame-time", "0.1", "--caustics", "off",
+                     "--shadow-list", flag, "--out", str(out)]) == 0
+        rows[flag] = json.loads((out / "bench_frame.json").read_text())[0]
+    assert rows["on"]["shadow_list"] is True and rows["off"]["shadow_list"] is False
+    assert rows["on"]["render.shadow_ms"] > 0 and "render.shadow_trace_ms" not in rows["on"]
+    assert rows["off"]["render.shadow_trace_ms"] > 0
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:   # argparse's one line and status 2
+        main(["bench", "frame", "--shadow-list", "maybe", "--out", str(tmp_path)])
+    assert exc.value.code == 2 and "--shadow-list" in capsys.readouterr().err
