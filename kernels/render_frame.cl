@@ -43,7 +43,7 @@ __kernel void render_gather(RENDER_GEOM_PARAMS, __constant const RenderParams* p
                             __global const uint* block_sums, __global Ray* out,
                             const GatherParams gp, __global const float4* radiance,
                             __global float4* fb, __global uchar4* rgba,
-                            __global const ulong4* restrict shadow_light)
+                            __global const ulong* restrict shadow_light)
 {
     const uint n = counts[depth];
     if (gp.finish) {

@@ -116,6 +116,26 @@ typedef struct {
     bool caustic;
 } ShadowSite;
 
+/* The ShadowSite in *o of a hit h of ray r at surface s (surface_at); false when it adds no
+ * direct light (no lights, no weight). */
+inline bool shadow_site_of(__global const Material* restrict g_mat,
+                           __constant const RenderParams* prm, const Ray* r, const Hit* h,
+                           const Surface* s, const CausticParams* cp, ShadowSite* o)
+{
+    if (prm->n_lights == 0) return false;
+    o->s = *s;
+    const Material m = g_mat[s->material];
+    o->w = attenuated_weight(r, h->t, g_mat) * direct_fraction(&m);
+    if (max3(o->w) <= 0.0f) return false;
+    o->specular = m.specular;
+    o->d = ray_dir(r);
+    facing_normals(&o->s, o->d, &o->nf_g, &o->nf_s);
+    o->org = offset_ray(o->s.p, o->nf_g);
+    o->medium = r->medium;
+    o->caustic = cp->enabled && h->inst == cp->pool_instance && r->medium >= 0;
+    return true;
+}
+
 /* Hit i's ShadowSite in *o; false when it adds no direct light (a miss, no lights, no weight). */
 inline bool shadow_site(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
                         __global const Ray* restrict rays, __global const Hit* restrict hits,
@@ -124,17 +144,8 @@ inline bool shadow_site(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
     const Hit h = hits[i];
     if (h.prim < 0 || prm->n_lights == 0) return false;
     const Ray r = rays[i];
-    o->s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
-    const Material m = g_mat[o->s.material];
-    o->w = attenuated_weight(&r, h.t, g_mat) * direct_fraction(&m);
-    if (max3(o->w) <= 0.0f) return false;
-    o->specular = m.specular;
-    o->d = ray_dir(&r);
-    facing_normals(&o->s, o->d, &o->nf_g, &o->nf_s);
-    o->org = offset_ray(o->s.p, o->nf_g);
-    o->medium = r.medium;
-    o->caustic = cp->enabled && h.inst == cp->pool_instance && r.medium >= 0;
-    return true;
+    const Surface s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
+    return shadow_site_of(g_mat, prm, &r, &h, &s, cp, o);
 }
 
 /* Light li at site o unshadowed: the direction to it and its distance (INFINITY: directional),

@@ -61,7 +61,7 @@ __kernel void render_shade_list(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                 const CausticParams cprm, LIGHT_BUFFER_PARAMS,
                                 __global ShadowRay* restrict shadow_list,
                                 __global uint* restrict list_counts, const ShadowListParams lp,
-                                __global ulong4* restrict shadow_light)
+                                __global ulong* restrict shadow_light)
 {
     __local uint group_count[3], group_base[2], group_full;
     uint spilled = 0;   /* lights whose shadow ray found no room */
@@ -72,11 +72,13 @@ __kernel void render_shade_list(SCENE_PARAMS, RENDER_GEOM_PARAMS,
         ShadowSite o;
         bool site = false;
         uint q = 0;
-        if (i < n) {
+        if (i < n) {   /* one surface_at for the shading and the shadow rays */
             const Ray r = rays[i];
-            shade_hit(RENDER_GEOM_ARGS, prm, cam, r, hits[i], i, depth, radiance, child_counts,
-                      aov, write_aov);
-            site = shadow_site(RENDER_GEOM_ARGS, prm, rays, hits, i, &cprm, &o);
+            const Hit h = hits[i];
+            Surface surf;
+            shade_hit_at(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts,
+                         aov, write_aov, &surf);
+            site = h.prim >= 0 && shadow_site_of(g_mat, prm, &r, &h, &surf, &cprm, &o);
             q = r.pixel;
         }
         float3 sum = (float3)(0.0f);
@@ -141,7 +143,7 @@ __kernel void render_shadow_spill(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                   const uint depth, __global const float4* restrict radiance,
                                   const CausticParams cprm, LIGHT_BUFFER_PARAMS,
                                   __global const uint* restrict list_counts,
-                                  __global ulong4* restrict shadow_light)
+                                  __global ulong* restrict shadow_light)
 {
     if (list_counts[2] == 0u) return;
     const uint n = counts[depth];
@@ -169,7 +171,7 @@ __kernel void render_shadow_list(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_
                                  __constant const RenderParams* prm,
                                  __global const ShadowRay* restrict shadow_list,
                                  __global const uint* restrict list_counts,
-                                 const ShadowListParams lp, __global ulong4* restrict shadow_light,
+                                 const ShadowListParams lp, __global ulong* restrict shadow_light,
                                  __global uint* restrict stats)
 {
     const uint n_full = min(list_counts[0], lp.full_room);

@@ -154,12 +154,13 @@ inline int spawn_children(const Ray* r, const Surface* s, float3 w, uint depth,
 }
 
 /* Shading of ray i of the wavefront with its closest hit h (no shadow rays: render_shadow):
- * ambient, sky on a miss, Beer-Lambert, the child count for the compaction, the primary AOV. */
-inline void shade_hit(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
-                      __constant const Camera* cam, const Ray r, const Hit h, uint i,
-                      const uint depth, __global float4* restrict radiance,
-                      __global uint* restrict child_counts, __global Aov* restrict aov,
-                      const uint write_aov)
+ * ambient, sky on a miss, Beer-Lambert, the child count for the compaction, the primary AOV.
+ * The hit's surface in *hit_surface (render_shadow_list.cl shades and lists at once). */
+inline void shade_hit_at(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                         __constant const Camera* cam, const Ray r, const Hit h, uint i,
+                         const uint depth, __global float4* restrict radiance,
+                         __global uint* restrict child_counts, __global Aov* restrict aov,
+                         const uint write_aov, Surface* hit_surface)
 {
     float3 L;
     uint n_children = 0;
@@ -172,6 +173,7 @@ inline void shade_hit(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
                            : (float3)(0.0f);
     } else {
         const Surface s = surface_at(RENDER_GEOM_ARGS, h.inst, h.prim, h.u, h.v);
+        *hit_surface = s;
         const Material m = g_mat[s.material];
         const float3 w = attenuated_weight(&r, h.t, g_mat);
         L = w * direct_fraction(&m) * prm->ambient.xyz * s.kd;
@@ -191,6 +193,17 @@ inline void shade_hit(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
         uint x, y;
         if (pixel_of(cam, r.pixel, &x, &y)) aov[y * cam->width + x] = a;
     }
+}
+
+inline void shade_hit(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
+                      __constant const Camera* cam, const Ray r, const Hit h, uint i,
+                      const uint depth, __global float4* restrict radiance,
+                      __global uint* restrict child_counts, __global Aov* restrict aov,
+                      const uint write_aov)
+{
+    Surface s;
+    shade_hit_at(RENDER_GEOM_ARGS, prm, cam, r, h, i, depth, radiance, child_counts, aov,
+                 write_aov, &s);
 }
 
 /* Writes ray i's children into the next wavefront at its compacted offset: the exclusive offset

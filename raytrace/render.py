@@ -462,24 +462,24 @@ class Renderer:
     def _check_fits(self, s: RenderSettings) -> None:
         """One-line DeviceLimitError when the ray slots and per-pixel buffers do not fit."""
         check_fits(self.rt, self.capacity * bytes_per_ray_slot(s)
-                   + self.n_pixels * (20 + s.aov * AOV.itemsize) + s.shadow_list * 32 * self.n_q,
+                   + self.n_pixels * (20 + s.aov * AOV.itemsize) + s.shadow_list * 24 * self.n_q,
                    f"render {s.width}x{s.height}", largest=16 * self.n_pixels)
 
     def _shadow_list_buffers(self) -> None:
         """With ``shadow_list``, the list (its main part, then the part for full light-buffer
-        cells) and 32 bytes of fixed-point light per tile-order pixel (zeroed by each frame's
+        cells) and 24 bytes of fixed-point light per tile-order pixel (zeroed by each frame's
         first step); without, a pixel's worth that the gather kernels bind."""
         s, rt = self.settings, self.rt
         if not s.shadow_list:
             if self.shadow_light is None:
-                self.shadow_light = rt.to_device(np.zeros(4, np.uint64))
+                self.shadow_light = rt.to_device(np.zeros(3, np.uint64))
             return
         main, full = shadow_list_rooms(s, self.capacity)
         self.list_params = np.array([(main, full, 0, 0)], SHADOW_LIST_PARAMS)[0]
         if self.shadow_list is None or self.shadow_list.size < (main + full) * SHADOW_RAY.itemsize:
             self.shadow_list = rt.buffer(max(1, main + full) * SHADOW_RAY.itemsize)
-        if self.shadow_light is None or self.shadow_light.size < 32 * self.n_q:
-            self.shadow_light = rt.to_device(np.zeros(4 * self.n_q, np.uint64))
+        if self.shadow_light is None or self.shadow_light.size < 24 * self.n_q:
+            self.shadow_light = rt.to_device(np.zeros(3 * self.n_q, np.uint64))
         self._bound_sig = None
 
     def set_shadow_list(self, on: bool, room: float | None = None) -> None:
@@ -830,7 +830,7 @@ class Renderer:
         list_size = self._list_size() if s.shadow_list else None
         key = (sizes, deepest, len(self.scene.lights) > 0, self._stage_per_depth,
                s.overlap_levels, s.overlap_from, few, bins, self._bind_version, s.shadow_list,
-               list_size)
+               list_size, len(self.scene.lights) if s.shadow_list else 0)
         ops = self._plans.get(key)
         if ops is None:
             if len(self._plans) >= 16:
@@ -910,12 +910,13 @@ class Renderer:
 
         listed = s.shadow_list and has_lights
         if listed:   # every pixel's shadow-list light starts the frame at zero
-            ops.append((self._FILL, self.shadow_light, 32 * self.n_q, "render.shadow"))
+            ops.append((self._FILL, self.shadow_light, 24 * self.n_q, "render.shadow"))
         for (rp, (g_both, g_accumulate, g_finish, g_scatter, g_finish_list), raygen_size, _), \
                 sz in zip(self._plan, sizes, strict=True):
             bind(self.k_raygen, rp=rp)
             launch(self.k_raygen, raygen_size, None)
             if listed:   # the shading lists every level's shadow rays, one launch traces them
+                spill_from = self._first_spill(rp["n_rays"])
                 for depth in range(deepest + 1):
                     k = ks[depth]
                     ray_size, scan_size, scatter_size, pixel_size = sz[depth]
@@ -924,7 +925,8 @@ class Renderer:
                         ops.append((self._FLUSH,))
                     launch(k["shade_list"], ray_size, ls)
                     # the rays with no room in the list, before this level's buffers go
-                    launch(k["shadow_spill"], (min(ray_size[0], LAUNCH_FLOOR),), ls)
+                    if depth >= spill_from:
+                        launch(k["shadow_spill"], (min(ray_size[0], LAUNCH_FLOOR),), ls)
                     if depth < deepest:
                         launch(k["scan"], scan_size, scan_ls)
                     bind(k["gather"], gp=g_both if depth < deepest else g_accumulate)
@@ -985,6 +987,21 @@ class Renderer:
                 if not s.fuses:
                     launch(nxt["shade"], next_size, ls)
         return ops
+
+    def _first_spill(self, n_rays: int) -> int:
+        """The first level whose shadow rays can find the shadow list full: before it, the
+        levels' rays (a level at most twice the last, at most the slots) times the lights fit in
+        its main part (rays of full cells past their part go there too), so they need no
+        render_shadow_spill launch."""
+        main = int(self.list_params["main_room"])
+        lights = len(self.scene.lights)
+        total, n = 0, n_rays
+        for depth in range(self.settings.bounces + 1):
+            total += lights * n
+            if total > main:
+                return depth
+            n = min(self.capacity, 2 * n)
+        return self.settings.bounces + 1
 
     def _run(self, ops: list, rebind: bool) -> None:
         """Enqueue a plan: each launch one bare enqueue, its event recorded under its stage."""
