@@ -92,18 +92,21 @@ def test_the_per_level_stage_light_up_to_rounding(rt, chunk):
     n_chunks = len(r1.chunks)
     assert (n_chunks > 1) == (chunk is not None)
     got = stages(r1)
-    # per chunk the list's launch and, from the first level whose rays could find the list
-    # full (two lights: level 0's could not), each level's launch for the rays with no room
+    # per chunk the list's launch; from the first level whose rays could find the list full
+    # (two lights: level 0's could not) the scans take the rays with no room
     assert r1._first_spill(int(r1._plan[0][0]["n_rays"])) == 1
-    assert got.count("render.shadow") == 4 * n_chunks and "render.shadow_trace" not in got
+    assert got.count("render.shadow") == n_chunks and "render.shadow_trace" not in got
+    names = [op[1].function_name for op in r1._last_ops if op[0] == r1._LAUNCH]
+    assert names.count("render_scan_spill") == 2 * n_chunks   # levels 1 and 2 (3: no scan)
+    assert names.count("render_scan") == n_chunks
     assert got.count("render.shade") == 4 * n_chunks   # levels 0..3, each shading its hits
     assert img1[..., :3].std() > 5
 
 
 def test_no_room_changes_no_byte(rt):
-    """Room for every ray, for some (the rest spilled: traced by their level's
-    render_shadow_spill), for none: the same bytes, framebuffer too, and the same rays traced;
-    the counts say where they went."""
+    """Room for every ray, for some (the rest spilled: traced by their level's scan,
+    render_scan_spill, or the deepest level's by the list's launch), for none: the same bytes,
+    framebuffer too, and the same rays traced; the counts say where they went."""
     s = RenderSettings(width=24, height=18, spp=2, bounces=3, **LISTED)
     sc = tiny_scene(rt)
     runs = [frame(rt, sc, dataclasses.replace(s, shadow_list_room=room))
@@ -231,3 +234,27 @@ def test_header_constants_mirror_python():
     # the pixel field holds the largest image's tile-order pixels, the light index above them
     assert (16384 // 8) ** 2 * 64 <= 1 << T.SHADOW_RAY_LIGHT_SHIFT
     assert (T.MAX_LIGHTS - 1) << T.SHADOW_RAY_LIGHT_SHIFT < 1 << 32
+
+
+def test_few_work_items_loop_over_every_hit(rt, monkeypatch):
+    """Every per-ray and list kernel launched with one work-group loops over its hits and rays
+    (a work-item's state reset per hit, the spill marks included): the same bytes as launches
+    of a work-item per slot, with room for all, some and none of the rays."""
+    s = RenderSettings(width=24, height=18, spp=2, bounces=3, **LISTED)
+    sc = tiny_scene(rt)
+    want = {room: frame(rt, sc, dataclasses.replace(s, shadow_list_room=room))[1:3]
+            for room in (0.5, 0.004, 0.0)}
+    real = Renderer._launch_sizes
+
+    def one_group(self, depths, hint):
+        ls = (self.settings.local_size,)
+        return tuple((ls, scan, ls, ls) for _, scan, _, _ in real(self, depths, hint))
+
+    monkeypatch.setattr(Renderer, "_launch_sizes", one_group)
+    monkeypatch.setattr(Renderer, "_list_size", lambda self: (self.settings.local_size,))
+    for room, (img, fb) in want.items():
+        r, img_b, fb_b, st = frame(rt, sc, dataclasses.replace(s, shadow_list_room=room))
+        assert all(op[2] == (64,) for op in r._last_ops if op[0] == r._LAUNCH
+                   and op[1].function_name in ("render_shade_list", "render_shadow_list"))
+        assert np.array_equal(img, img_b) and np.array_equal(fb, fb_b), room
+        assert st["shadow_rays_spilled"] > 0 or room == 0.5
