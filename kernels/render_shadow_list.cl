@@ -11,11 +11,11 @@
  * first, so that whole warps take alike rays; rays that start in a full light-buffer cell (a
  * fine grid or a BVH walk answers them) go to a part of their own, traced first (past its room,
  * last in the main part). A hit whose shadow ray finds no room says so in its radiance's w (a
- * mask of the lights: as_float), and its level's scan (render_scan_spill) traces those rays
- * before the level's buffers are reused, or for the deepest level render_shadow_list (the same
- * answer, the same sum; the shading holds no walk: on the H200 one out of line took the
- * baseline scene's level-0 shading from 0.147 to 0.255 ms, and a launch of its own per level
- * cost 0.005 ms).
+ * mask of the lights: as_float), and render_shadow_spill traces those rays before the level's
+ * buffers are reused (the same answer, the same sum; the shading holds no walk: on the H200 one
+ * out of line took the baseline scene's level-0 shading from 0.147 to 0.255 ms). Those launches
+ * cost 0.005 ms each; folded into the levels' scans and the list's launch they cost more (the
+ * list's launch 0.344 against 0.244 ms: BENCHMARKS.md, fourteenth session).
  *
  * render_shadow_list traces the list: the same shadow_transmittance as render_shadow, then adds
  * T w E brdf to the pixel's shadow light (render_shadow_list.h: fixed-point sums, the same in any
@@ -26,7 +26,6 @@
 #include "render_surface.h"
 #include "render_shadow.h"
 #include "render_shadow_list.h"
-#include "render_scan.h"
 
 /* Classes of a shadow-list entry within a work-group: the full part, then the main part's
    crossing and other rays. */
@@ -134,77 +133,55 @@ __kernel void render_shade_list(SCENE_PARAMS, RENDER_GEOM_PARAMS,
     }
 }
 
-/* Hit i's shadow rays that found no room in the list (render_shade_list marks their lights in
- * radiance[i].w), traced and added as render_shadow_list adds a listed ray: the same sums. */
-inline void spill_hit(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
-                      __constant const RenderParams* prm, __global const Light* restrict lights,
-                      __global const Ray* restrict rays, __global const Hit* restrict hits,
-                      __global const float4* restrict radiance, uint i, const CausticParams* cp,
-                      __global ulong* restrict shadow_light)
+/* Level depth's shadow rays that found no room in the list (render_shade_list marks their
+ * lights in radiance[i].w), traced as render_shadow_list would; at once back when no ray of the
+ * frame's chunk spilled (list_counts[2]). */
+__kernel void render_shadow_spill(SCENE_PARAMS, RENDER_GEOM_PARAMS,
+                                  __constant const RenderParams* prm,
+                                  __global const Light* restrict lights,
+                                  __global const Ray* restrict rays,
+                                  __global const Hit* restrict hits, __global const uint* counts,
+                                  const uint depth, __global const float4* restrict radiance,
+                                  const CausticParams cprm, LIGHT_BUFFER_PARAMS,
+                                  __global const uint* restrict list_counts,
+                                  __global ulong* restrict shadow_light)
 {
-    const uint spilled = as_uint(radiance[i].w);
-    ShadowSite o;
-    if (!spilled || !shadow_site(RENDER_GEOM_ARGS, prm, rays, hits, i, cp, &o)) return;
-    for (uint l = 0; l < prm->n_lights; l++) {
-        float3 ldir, E, brdf;
-        float dist;
-        if (!((spilled >> l) & 1u) || !light_term(&o, lights[l], &ldir, &dist, &E, &brdf))
-            continue;
-        const float3 T = shadow_transmittance(TRACE_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS,
-                                              prm, l, o.org, ldir, dist, o.medium);
-        if (max3(T) > 0.0f) shadow_light_add(shadow_light, rays[i].pixel, T * (o.w * E * brdf));
+    if (list_counts[2] == 0u) return;
+    const uint n = counts[depth];
+    for (uint i = get_global_id(0); i < n; i += get_global_size(0)) {
+        const uint spilled = as_uint(radiance[i].w);
+        ShadowSite o;
+        if (!spilled || !shadow_site(RENDER_GEOM_ARGS, prm, rays, hits, i, &cprm, &o)) continue;
+        for (uint l = 0; l < prm->n_lights; l++) {
+            float3 ldir, E, brdf;
+            float dist;
+            if (!((spilled >> l) & 1u) || !light_term(&o, lights[l], &ldir, &dist, &E, &brdf))
+                continue;
+            const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS,
+                                                  LIGHT_BUFFER_ARGS, prm, l, o.org, ldir, dist,
+                                                  o.medium);
+            if (max3(T) > 0.0f)
+                shadow_light_add(shadow_light, rays[i].pixel, T * (o.w * E * brdf));
+        }
     }
 }
 
-/* The parameters of a level's spilled shadow rays. */
-#define SPILL_PARAMS                                                                           \
-    __global const Light* restrict lights, __global const Ray* restrict rays,                 \
-        __global const Hit* restrict hits, __global const float4* restrict radiance,          \
-        const CausticParams cprm, __global const uint* restrict list_counts,                  \
-        __global ulong* restrict shadow_light
-
-/* render_scan (render_secondary.cl) for a level whose shadow rays may have found the list full:
- * first its spilled rays (none while list_counts[2] is 0: a test of one word), then the scan.
- * The scan's launch stands in for a launch of their own, and the scan runs on, its child counts
- * untouched by the spill. */
-__kernel __attribute__((reqd_work_group_size(RENDER_SCAN_WG, 1, 1))) void render_scan_spill(
-    __global uint* child_counts, __global uint* counts, const uint depth, const uint capacity,
-    __global uint* block_sums, __global uint* ticket, __global uint* stats, SCENE_PARAMS,
-    RENDER_GEOM_PARAMS, __constant const RenderParams* prm, LIGHT_BUFFER_PARAMS, SPILL_PARAMS)
-{
-    __local uint tmp[RENDER_SCAN_WG];
-    __local uint is_last;
-    if (list_counts[2] != 0u) {
-        const uint n = counts[depth];
-        for (uint i = get_global_id(0); i < n; i += get_global_size(0))
-            spill_hit(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays,
-                      hits, radiance, i, &cprm, shadow_light);
-    }
-    scan_level(child_counts, counts, depth, capacity, block_sums, ticket, stats, tmp, &is_last);
-}
-
-/* The list's rays, the full part first, then the spilled rays of level depth (the deepest: its
- * buffers live until now); adds the frame's count of listed rays and of those spilled to the
- * stats. The list's counts are zeroed by render_raygen. */
+/* The list's rays, the full part first; adds the frame's count of listed rays and of those
+ * spilled to the stats. The list's counts are zeroed by render_raygen. */
 __kernel void render_shadow_list(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
                                  __constant const RenderParams* prm,
                                  __global const ShadowRay* restrict shadow_list,
-                                 const ShadowListParams lp, __global uint* restrict stats,
-                                 __global const uint* counts, const uint depth, SPILL_PARAMS)
+                                 __global const uint* restrict list_counts,
+                                 const ShadowListParams lp, __global ulong* restrict shadow_light,
+                                 __global uint* restrict stats)
 {
     const uint n_full = min(list_counts[0], lp.full_room);
-    const uint n_list = n_full + min(list_counts[1], lp.main_room);
-    const uint n = n_list + (list_counts[2] ? counts[depth] : 0u);
+    const uint n = n_full + min(list_counts[1], lp.main_room);
     if (get_global_id(0) == 0) {
-        stats[RENDER_STAT_SHADOW_LISTED] += n_list;
+        stats[RENDER_STAT_SHADOW_LISTED] += n;
         stats[RENDER_STAT_SHADOW_SPILLED] += list_counts[2];
     }
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
-        if (j >= n_list) {
-            spill_hit(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm, lights, rays,
-                      hits, radiance, j - n_list, &cprm, shadow_light);
-            continue;
-        }
         const ShadowRay s = shadow_list[j < n_full ? lp.main_room + j : j - n_full];
         const float3 org = (float3)(s.ox, s.oy, s.oz), dir = (float3)(s.dx, s.dy, s.dz);
         const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS,

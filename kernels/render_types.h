@@ -48,7 +48,7 @@
 /* Depth limit and the stats buffer: stats[d] = rays traced at depth d over the frame,
  * stats[RENDER_STAT_DROPPED] = children dropped because the wavefront was full; with the shadow
  * list (render_shadow_list.cl), the shadow rays it traced and those spilled for want of room
- * (traced by their level's render_scan_spill). */
+ * (traced by their level's render_shadow_spill). */
 #define RENDER_MAX_DEPTH 32
 #define RENDER_STAT_DROPPED (RENDER_MAX_DEPTH + 1)
 #define RENDER_STAT_SHADOW_LISTED (RENDER_MAX_DEPTH + 2)

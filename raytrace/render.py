@@ -35,13 +35,12 @@ queue and one radiance buffer serves.
 
 ``shadow_list`` (``device_shadow_list``: on a GPU) replaces every level's shadow launch with
 one after the last level (``kernels/render_shadow_list.cl``): the shading lists its shadow rays
-(render.shade), a ray with no room spills to its level's scan (render.secondary: a test of one
-word when none did; the deepest level's, to the list's launch), and the list's launch
-(render.shadow) adds each traced ray's light to its pixel in fixed point, which the tonemap
-pass adds to the framebuffer:
+(render.shade), a ray with no room spills to its level's own launch (render.shadow, returning
+at once when none did), and the list's launch (render.shadow) adds each traced ray's light to
+its pixel in fixed point, which the tonemap pass adds to the framebuffer:
 
     render.raygen, a fill that zeroes the pixels' shadow light (render.shadow)
-    per depth: trace, shade (and list), scan (and spills), gather
+    per depth: trace, shade (and list), spill, scan, gather
     render.shadow (the list), tonemap
 
 ``coop_from`` D (None: off; ``device_coop_from``: 2 on a GPU) lets the trace and shadow rays
@@ -178,7 +177,7 @@ class RenderSettings:
                                   #: stage's by float rounding only
     shadow_list_room: float = 0.5  #: the list's entries per ray slot (and an eighth more for
                                    #: rays in full light-buffer cells); a ray with no room is
-                                   #: spilled: traced by its level's scan (the same image)
+                                   #: spilled: traced by its level's own launch (the same image)
 
     @property
     def overlaps(self) -> bool:
@@ -603,9 +602,9 @@ class Renderer:
                     ks["shade_list"] = rt.kernel_launcher(
                         "render_shadow_list.cl", "render_shade_list",
                         stage=self._stage_name("render.shade", d))
-                    ks["scan_spill"] = rt.kernel_launcher(
-                        "render_shadow_list.cl", "render_scan_spill",
-                        stage=self._stage_name("render.secondary", d))
+                    ks["shadow_spill"] = rt.kernel_launcher(
+                        "render_shadow_list.cl", "render_shadow_spill",
+                        stage=self._stage_name("render.shadow", d))
                     self._bound_sig = None
             if self.k_shadow_list is None:
                 self.k_shadow_list = rt.kernel_launcher(
@@ -679,10 +678,7 @@ class Renderer:
         if s.shadow_list:
             listing = {"shadow_list": self.shadow_list, "list_counts": self.list_counts,
                        "lp": self.list_params, "shadow_light": self.shadow_light}
-            # the deepest level's buffers (its spilled rays): bound by the frame's plan
-            self.k_shadow_list.bind(**scene, **shading, **lbuf, **listing, stats=self.stats,
-                                    lights=self.scene.light_buf, cprm=self.caustic_params,
-                                    counts=self.counts)
+            self.k_shadow_list.bind(**scene, **shading, **lbuf, **listing, stats=self.stats)
         for d, k in enumerate(self._k):
             wave = {"rays": self.rays[d % 2], "counts": self.counts, "depth": d}
             hits, radiance = self.hits[d % 2], self.radiance[d % 2]
@@ -697,14 +693,10 @@ class Renderer:
             if "shade_list" in k and s.shadow_list:
                 k["shade_list"].bind(**scene, **shading, cam=self.camera_buf, **wave, hits=hits,
                                      **out, **light, **listing)
-                k["scan_spill"].bind(**scene, **shading, lights=self.scene.light_buf,
-                                     cprm=self.caustic_params, **lbuf, rays=self.rays[d % 2],
-                                     hits=hits, radiance=radiance,
-                                     list_counts=self.list_counts,
-                                     shadow_light=self.shadow_light, child_counts=self.child,
-                                     counts=self.counts, depth=d, capacity=self.capacity,
-                                     block_sums=self.block_sums, ticket=self.ticket,
-                                     stats=self.stats)
+                k["shadow_spill"].bind(**scene, **shading, lights=self.scene.light_buf,
+                                       cprm=self.caustic_params, **lbuf, **wave, hits=hits,
+                                       radiance=radiance, list_counts=self.list_counts,
+                                       shadow_light=self.shadow_light)
             for f in ("", "_binned"):   # the binned flavour: the plain kernel's arguments
                 if "shadow" + f in k:
                     k["shadow" + f].bind(**scene, **shading, **light, **wave, hits=hits,
@@ -932,14 +924,13 @@ class Renderer:
                     if depth == 0 and rp["zero_stats"]:
                         ops.append((self._FLUSH,))
                     launch(k["shade_list"], ray_size, ls)
-                    if depth < deepest:   # with the rays that found no room, if they can be
-                        launch(k["scan_spill" if depth >= spill_from else "scan"], scan_size,
-                               scan_ls)
+                    # the rays with no room in the list, before this level's buffers go
+                    if depth >= spill_from:
+                        launch(k["shadow_spill"], (min(ray_size[0], LAUNCH_FLOOR),), ls)
+                    if depth < deepest:
+                        launch(k["scan"], scan_size, scan_ls)
                     bind(k["gather"], gp=g_both if depth < deepest else g_accumulate)
                     launch(k["gather"], scatter_size, ls)
-                # the list, and the deepest level's rays that found no room in it
-                bind(self.k_shadow_list, depth=deepest, rays=self.rays[deepest % 2],
-                     hits=self.hits[deepest % 2], radiance=self.radiance[deepest % 2])
                 launch(self.k_shadow_list, list_size, ls)
                 bind(ks[deepest]["finish"], gp=g_finish_list)
                 launch(ks[deepest]["finish"], sz[deepest][3], ls)
@@ -1000,8 +991,8 @@ class Renderer:
     def _first_spill(self, n_rays: int) -> int:
         """The first level whose shadow rays can find the shadow list full: before it, the
         levels' rays (a level at most twice the last, at most the slots) times the lights fit in
-        its main part (rays of full cells past their part go there too), so their scan needs no
-        spill (render_scan_spill)."""
+        its main part (rays of full cells past their part go there too), so they need no
+        render_shadow_spill launch."""
         main = int(self.list_params["main_room"])
         lights = len(self.scene.lights)
         total, n = 0, n_rays
@@ -1037,10 +1028,8 @@ class Renderer:
                 old[2] == self._bind_version:
             return
         for k in self._k:
-            if "scan_spill" in k:
-                k["scan_spill"].bind(cprm=self.caustic_params)
-        if self.k_shadow_list is not None and self.settings.shadow_list:
-            self.k_shadow_list.bind(cprm=self.caustic_params)
+            if "shadow_spill" in k:
+                k["shadow_spill"].bind(cprm=self.caustic_params)
             for name in ("shade_list", "shadow", "shadow_trace", "shadow_trace_shade",
                          "shadow_coop", "shadow_trace_coop", "shadow_trace_shade_coop",
                          "shadow_binned", "shadow_trace_binned", "shadow_trace_shade_binned"):

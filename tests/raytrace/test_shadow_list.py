@@ -92,21 +92,20 @@ def test_the_per_level_stage_light_up_to_rounding(rt, chunk):
     n_chunks = len(r1.chunks)
     assert (n_chunks > 1) == (chunk is not None)
     got = stages(r1)
-    # per chunk the list's launch; from the first level whose rays could find the list full
-    # (two lights: level 0's could not) the scans take the rays with no room
+    # per chunk the list's launch and, from the first level whose rays could find the list
+    # full (two lights: level 0's could not), each level's launch for the rays with no room
     assert r1._first_spill(int(r1._plan[0][0]["n_rays"])) == 1
-    assert got.count("render.shadow") == n_chunks and "render.shadow_trace" not in got
+    assert got.count("render.shadow") == 4 * n_chunks and "render.shadow_trace" not in got
     names = [op[1].function_name for op in r1._last_ops if op[0] == r1._LAUNCH]
-    assert names.count("render_scan_spill") == 2 * n_chunks   # levels 1 and 2 (3: no scan)
-    assert names.count("render_scan") == n_chunks
+    assert names.count("render_shadow_spill") == 3 * n_chunks
     assert got.count("render.shade") == 4 * n_chunks   # levels 0..3, each shading its hits
     assert img1[..., :3].std() > 5
 
 
 def test_no_room_changes_no_byte(rt):
-    """Room for every ray, for some (the rest spilled: traced by their level's scan,
-    render_scan_spill, or the deepest level's by the list's launch), for none: the same bytes,
-    framebuffer too, and the same rays traced; the counts say where they went."""
+    """Room for every ray, for some (the rest spilled: traced by their level's
+    render_shadow_spill), for none: the same bytes, framebuffer too, and the same rays traced;
+    the counts say where they went."""
     s = RenderSettings(width=24, height=18, spp=2, bounces=3, **LISTED)
     sc = tiny_scene(rt)
     runs = [frame(rt, sc, dataclasses.replace(s, shadow_list_room=room))
@@ -255,6 +254,7 @@ def test_few_work_items_loop_over_every_hit(rt, monkeypatch):
     for room, (img, fb) in want.items():
         r, img_b, fb_b, st = frame(rt, sc, dataclasses.replace(s, shadow_list_room=room))
         assert all(op[2] == (64,) for op in r._last_ops if op[0] == r._LAUNCH
-                   and op[1].function_name in ("render_shade_list", "render_shadow_list"))
+                   and op[1].function_name in ("render_shade_list", "render_shadow_list",
+                                       "render_shadow_spill"))
         assert np.array_equal(img, img_b) and np.array_equal(fb, fb_b), room
         assert st["shadow_rays_spilled"] > 0 or room == 0.5
