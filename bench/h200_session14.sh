@@ -16,6 +16,10 @@
 #   it (noclear: the light adds up frame after frame, a wrong image) or never reads it (notake:
 #   no shadowed light at all), per depth at 1920x1080 against nofb, in turns twice.
 # PART tests: the device tests of the shadow list and of the renderer's shadow stages.
+# Each part ran on the tree of the commit its results are named by (bench/results/
+# h200-2026-12-04-s14/PART_COMMIT.json): list at 96e8ae1, ae73871, 42869e7, 159f305 and f0f43f2;
+# fallback at 3e7b93e; finish at fac209a (fallback and finish need a tree from before ae73871:
+# their seds edit the walk that the shading held then); tests beside each list call.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
 out=${1:?OUTDIR}

@@ -287,7 +287,7 @@ GPU_LIGHT_BUFFER = 1024
 
 def device_shadow_list(rt: Runtime) -> bool:
     """``shadow_list`` on ``rt``'s device: on a GPU, where every level's shadow rays in one
-    launch took the baseline frame from 2.04-2.07 to 1.97-1.99 kernel ms on the H200; off on a
+    launch took the baseline frame from 2.04 to 1.92-1.94 kernel ms on the H200; off on a
     CPU, where PoCL's frames took the same either way (BENCHMARKS.md, fourteenth session)."""
     return bool(rt.is_gpu)
 
