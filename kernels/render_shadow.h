@@ -173,6 +173,22 @@ inline bool light_term(const ShadowSite* o, const Light li, float3* ldir, float*
     return true;
 }
 
+/* The shadow ray from org towards light li: its unit direction and length (INFINITY:
+ * directional). Every shadow stage traces this ray, from the offset origin to the light (a spot's
+ * light_term direction leaves from the surface point), so that a list entry (ShadowRay) need not
+ * carry it: the list's kernel derives the same ray from the origin and the light. */
+inline void shadow_ray_toward(const Light li, float3 org, float3* dir, float* tmax)
+{
+    if (li.kind == LIGHT_SPOT) {
+        const float3 to = li.position.xyz - org;
+        *tmax = length(to);
+        *dir = to / *tmax;
+    } else {
+        *dir = -li.direction.xyz;
+        *tmax = INFINITY;
+    }
+}
+
 /* Whether light that adds E brdf at site o goes unshadowed, with no shadow ray: it adds less than
  * min_weight to the pixel (the cut-off of children), e.g. the water's sharp highlight away from
  * the sun's mirror direction, a third of the pool's shadow rays. Unoccluded, the same sum. */
@@ -196,13 +212,15 @@ inline void shadow_ray(TRACE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
     if (o.caustic) sum = caustic_lookup(caustic_map, cp, o.s.p, o.nf_g) * o.s.kd;
     for (uint l = 0; l < prm->n_lights; l++) {
         if (o.caustic && ((cp->light_mask >> l) & 1u)) continue;
+        const Light li = lights[l];
         float3 ldir, E, brdf;
         float dist;
-        if (!light_term(&o, lights[l], &ldir, &dist, &E, &brdf)) continue;
+        if (!light_term(&o, li, &ldir, &dist, &E, &brdf)) continue;
         if (light_below_cut(prm, &o, E, brdf)) {
             sum += E * brdf;
             continue;
         }
+        shadow_ray_toward(li, o.org, &ldir, &dist);
         const float3 T = shadow_transmittance(TRACE_ARGS, RENDER_GEOM_ARGS, LIGHT_BUFFER_ARGS, prm,
                                               l, o.org, ldir, dist, o.medium);
         if (max3(T) <= 0.0f) continue;

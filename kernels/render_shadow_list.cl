@@ -33,22 +33,17 @@
 #define LIST_CROSSING 1u
 #define LIST_OTHER 2u
 
-inline ShadowRay shadow_entry(const ShadowSite* o, uint q, uint light, float3 ldir, float dist,
-                              float3 c)
+inline ShadowRay shadow_entry(const ShadowSite* o, uint q, uint light, float3 c)
 {
     ShadowRay s;
     s.ox = o->org.x;
     s.oy = o->org.y;
     s.oz = o->org.z;
     s.pixel_light = q | (light << SHADOW_RAY_LIGHT_SHIFT);
-    s.dx = ldir.x;
-    s.dy = ldir.y;
-    s.dz = ldir.z;
-    s.medium = o->medium;
     s.cr = c.x;
     s.cg = c.y;
     s.cb = c.z;
-    s.tmax = dist;
+    s.medium = o->medium;
     return s;
 }
 
@@ -119,7 +114,7 @@ __kernel void render_shade_list(SCENE_PARAMS, RENDER_GEOM_PARAMS,
                                                             - group_full
                                        : 0u);
                 if (in_full || slot < lp.main_room) {
-                    shadow_list[slot] = shadow_entry(&o, q, l, ldir, dist, c);
+                    shadow_list[slot] = shadow_entry(&o, q, l, c);
                 } else {
                     spilled |= 1u << l;
                     atomic_inc(&list_counts[2]);
@@ -153,10 +148,12 @@ __kernel void render_shadow_spill(SCENE_PARAMS, RENDER_GEOM_PARAMS,
         ShadowSite o;
         if (!spilled || !shadow_site(RENDER_GEOM_ARGS, prm, rays, hits, i, &cprm, &o)) continue;
         for (uint l = 0; l < prm->n_lights; l++) {
+            const Light li = lights[l];
             float3 ldir, E, brdf;
             float dist;
-            if (!((spilled >> l) & 1u) || !light_term(&o, lights[l], &ldir, &dist, &E, &brdf))
+            if (!((spilled >> l) & 1u) || !light_term(&o, li, &ldir, &dist, &E, &brdf))
                 continue;
+            shadow_ray_toward(li, o.org, &ldir, &dist);
             const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS,
                                                   LIGHT_BUFFER_ARGS, prm, l, o.org, ldir, dist,
                                                   o.medium);
@@ -170,6 +167,7 @@ __kernel void render_shadow_spill(SCENE_PARAMS, RENDER_GEOM_PARAMS,
  * spilled to the stats. The list's counts are zeroed by render_raygen. */
 __kernel void render_shadow_list(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_PARAMS,
                                  __constant const RenderParams* prm,
+                                 __global const Light* restrict lights,
                                  __global const ShadowRay* restrict shadow_list,
                                  __global const uint* restrict list_counts,
                                  const ShadowListParams lp, __global ulong* restrict shadow_light,
@@ -183,11 +181,14 @@ __kernel void render_shadow_list(SCENE_PARAMS, RENDER_GEOM_PARAMS, LIGHT_BUFFER_
     }
     for (uint j = get_global_id(0); j < n; j += get_global_size(0)) {
         const ShadowRay s = shadow_list[j < n_full ? lp.main_room + j : j - n_full];
-        const float3 org = (float3)(s.ox, s.oy, s.oz), dir = (float3)(s.dx, s.dy, s.dz);
+        const uint l = s.pixel_light >> SHADOW_RAY_LIGHT_SHIFT;
+        const float3 org = (float3)(s.ox, s.oy, s.oz);
+        float3 dir;
+        float tmax;
+        shadow_ray_toward(lights[l], org, &dir, &tmax);
         const float3 T = shadow_transmittance(TRACE_SERIAL_ARGS, RENDER_GEOM_ARGS,
-                                              LIGHT_BUFFER_ARGS, prm,
-                                              s.pixel_light >> SHADOW_RAY_LIGHT_SHIFT, org, dir,
-                                              s.tmax, s.medium);
+                                              LIGHT_BUFFER_ARGS, prm, l, org, dir, tmax,
+                                              s.medium);
         if (max3(T) > 0.0f)
             shadow_light_add(shadow_light, s.pixel_light & SHADOW_RAY_PIXEL_MASK,
                              T * (float3)(s.cr, s.cg, s.cb));

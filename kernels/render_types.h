@@ -70,15 +70,15 @@ typedef struct __attribute__((aligned(16))) {
     uint sample;        /* primary sample index within its pixel (for AOVs) */
 } Ray;
 
-/* 48 bytes, as a Ray. One shadow ray of the shadow list (render_shadow_list.cl): what it
- * traces and what the light adds to its pixel when nothing blocks it. */
+/* 32 bytes: two float4 rows, 16-byte aligned. One shadow ray of the shadow list
+ * (render_shadow_list.cl): where it starts and what the light adds to its pixel when nothing
+ * blocks it; its direction and length follow from the origin and the light (shadow_ray_toward:
+ * render_shadow.h), so the entry leaves them out (48 bytes with them). */
 typedef struct __attribute__((aligned(16))) {
     float ox, oy, oz;   /* origin (m), already offset off the surface */
     uint pixel_light;   /* q | light << SHADOW_RAY_LIGHT_SHIFT */
-    float dx, dy, dz;   /* unit direction to the light */
-    int medium;         /* material id of the dielectric the ray starts in, -1: air */
     float cr, cg, cb;   /* the light's unshadowed share of the pixel: w E brdf */
-    float tmax;         /* distance to the light, INFINITY: directional */
+    int medium;         /* material id of the dielectric the ray starts in, -1: air */
 } ShadowRay;
 
 /* 16 bytes. The shadow list's per-launch values: its two parts' room in entries. The list holds

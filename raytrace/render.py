@@ -678,7 +678,8 @@ class Renderer:
         if s.shadow_list:
             listing = {"shadow_list": self.shadow_list, "list_counts": self.list_counts,
                        "lp": self.list_params, "shadow_light": self.shadow_light}
-            self.k_shadow_list.bind(**scene, **shading, **lbuf, **listing, stats=self.stats)
+            self.k_shadow_list.bind(**scene, **shading, **lbuf, **listing, stats=self.stats,
+                                    lights=self.scene.light_buf)
         for d, k in enumerate(self._k):
             wave = {"rays": self.rays[d % 2], "counts": self.counts, "depth": d}
             hits, radiance = self.hits[d % 2], self.radiance[d % 2]

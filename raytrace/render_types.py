@@ -77,9 +77,8 @@ RAY = np.dtype([("ox", np.float32), ("oy", np.float32), ("oz", np.float32), ("pi
                 ("wr", np.float32), ("wg", np.float32), ("wb", np.float32), ("sample", np.uint32)])
 
 SHADOW_RAY = np.dtype([("ox", np.float32), ("oy", np.float32), ("oz", np.float32),
-                       ("pixel_light", np.uint32), ("dx", np.float32), ("dy", np.float32),
-                       ("dz", np.float32), ("medium", np.int32), ("cr", np.float32),
-                       ("cg", np.float32), ("cb", np.float32), ("tmax", np.float32)])
+                       ("pixel_light", np.uint32), ("cr", np.float32), ("cg", np.float32),
+                       ("cb", np.float32), ("medium", np.int32)])
 
 CAMERA = np.dtype([("origin", f4), ("right", f4), ("up", f4), ("forward", f4),
                    ("width", np.uint32), ("height", np.uint32), ("spp", np.uint32),

@@ -198,7 +198,7 @@ def test_memory_and_settings(rt):
     assert bytes_per_ray_slot(s) == BYTES_PER_RAY_SLOT + -(-SHADOW_RAY.itemsize * 9 // 16)
     assert bytes_per_ray_slot(dataclasses.replace(s, shadow_list_room=0.0)) == BYTES_PER_RAY_SLOT
     assert shadow_list_rooms(s, 1000) == (500, 62)
-    assert SHADOW_RAY.itemsize == 48
+    assert SHADOW_RAY.itemsize == 32
     for bad in (-0.1, 8.5, float("nan")):
         with pytest.raises(ValueError, match="shadow_list_room must lie in"):
             RenderSettings(shadow_list=True, shadow_list_room=bad).resolved()
