@@ -20,16 +20,25 @@ inline Ray primary_ray(__constant const Camera* cam, uint q, uint s)
     return r;
 }
 
-/* Also zeroes the frame's stats (rp.zero_stats: the first chunk) and the chunk's shadow-list
- * counts (render_shadow_list.cl), launched with at least RENDER_STATS_LEN work-items. */
+/* Also zeroes the frame's stats (rp.zero_stats: the first chunk), the chunk's shadow-list counts
+ * (render_shadow_list.cl) and, with rp.zero_light, its pixels' shadow-list light
+ * (render_shadow_list.h: coalesced stores beside the rays', where a fill at the frame's start
+ * was a launch of its own); launched with at least RENDER_STATS_LEN work-items. */
 __kernel void render_raygen(__constant const Camera* cam, const RaygenParams rp,
                             __global Ray* rays, __global uint* counts, __global uint* stats,
-                            __global uint* list_counts)
+                            __global uint* list_counts, __global ulong* restrict shadow_light)
 {
     const uint i = get_global_id(0);
     if (i == 0) counts[0] = rp.n_rays;
     if (rp.zero_stats && i < RENDER_STATS_LEN) stats[i] = 0u;
     if (i < 3) list_counts[i] = 0u;
     if (i >= rp.n_rays) return;
-    rays[i] = primary_ray(cam, rp.q0 + i / cam->spp, i % cam->spp);
+    const uint q = rp.q0 + i / cam->spp, s = i % cam->spp;
+    if (rp.zero_light && s == 0) {
+        __global ulong* p = shadow_light + 3u * q;
+        p[0] = 0ul;
+        p[1] = 0ul;
+        p[2] = 0ul;
+    }
+    rays[i] = primary_ray(cam, q, s);
 }

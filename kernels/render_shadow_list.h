@@ -1,9 +1,9 @@
 /* The shadow list's light of each pixel (render_shadow_list.cl): three sums in 64-bit fixed
- * point, 32 bits of them fraction (24 bytes a pixel), that the list's shadow rays add to with atomics. Integer sums
- * are the same in any order, so a pixel's light does not depend on which work-item adds first,
- * nor on whether a ray was listed or spilled; the tonemap pass (render_frame.cl) adds the sum to
- * the framebuffer, and the frame's first step zeroes them (a fill: zeroing them in the tonemap
- * pass took 0.11 ms more on the H200 at 1920x1080). */
+ * point, 32 bits of them fraction (24 bytes a pixel), that the list's shadow rays add to with
+ * atomics. Integer sums are the same in any order, so a pixel's light does not depend on which
+ * work-item adds first, nor on whether a ray was listed or spilled; the tonemap pass
+ * (render_frame.cl) adds the sum to the framebuffer, and render_raygen zeroes the chunk's sums
+ * (zeroing them in the tonemap pass took 0.11 ms more on the H200 at 1920x1080). */
 #ifndef LBWATER_RENDER_SHADOW_LIST_H
 #define LBWATER_RENDER_SHADOW_LIST_H
 

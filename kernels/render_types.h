@@ -162,7 +162,7 @@ typedef struct {
     uint q0;            /* first tile-order pixel of the chunk */
     uint n_rays;        /* primary rays of the chunk (pixels x spp) */
     uint zero_stats;    /* 1 on the frame's first chunk: zero the stats */
-    uint pad;
+    uint zero_light;    /* 1 with the shadow list: zero the chunk's pixels' light */
 } RaygenParams;
 
 /* 20 bytes. render_gather's per-launch values: what this level of this chunk does. */

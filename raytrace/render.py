@@ -39,7 +39,7 @@ one after the last level (``kernels/render_shadow_list.cl``): the shading lists 
 at once when none did), and the list's launch (render.shadow) adds each traced ray's light to
 its pixel in fixed point, which the tonemap pass adds to the framebuffer:
 
-    render.raygen, a fill that zeroes the pixels' shadow light (render.shadow)
+    render.raygen (which zeroes the chunk's pixels' shadow light)
     per depth: trace, shade (and list), spill, scan, gather
     render.shadow (the list), tonemap
 
@@ -467,8 +467,8 @@ class Renderer:
 
     def _shadow_list_buffers(self) -> None:
         """With ``shadow_list``, the list (its main part, then the part for full light-buffer
-        cells) and 24 bytes of fixed-point light per tile-order pixel (zeroed by each frame's
-        first step); without, a pixel's worth that the gather kernels bind."""
+        cells) and 24 bytes of fixed-point light per tile-order pixel (render_raygen zeroes a
+        chunk's); without, a pixel's worth that the gather and raygen kernels bind."""
         s, rt = self.settings, self.rt
         if not s.shadow_list:
             if self.shadow_light is None:
@@ -672,7 +672,8 @@ class Renderer:
             return
         s = self.settings
         self.k_raygen.bind(cam=self.camera_buf, rays=self.rays[0], counts=self.counts,
-                           stats=self.stats, list_counts=self.list_counts)
+                           stats=self.stats, list_counts=self.list_counts,
+                           shadow_light=self.shadow_light)
         shading = {**geom, "prm": self.params_buf}
         listing = {}
         if s.shadow_list:
@@ -862,10 +863,8 @@ class Renderer:
         self._stats_handle = handle
 
     #: Plan steps: a launch (cl kernel, global size, local size, stage), arguments to bind
-    #: (Kernel, {name: value}; with one chunk only when the plan changes), a flush, and a fill
-    #: with zeros (buffer, bytes, stage).
-    _LAUNCH, _BIND, _FLUSH, _FILL = 0, 1, 2, 3
-    _ZERO = np.zeros(4, np.uint32)
+    #: (Kernel, {name: value}; with one chunk only when the plan changes), and a flush.
+    _LAUNCH, _BIND, _FLUSH = 0, 1, 2
 
     def _make_plan(self, sizes: tuple, deepest: int, has_lights: bool, few: tuple,
                    bins: tuple, list_size: tuple | None = None) -> list:
@@ -910,10 +909,11 @@ class Renderer:
                 launch(k[name], size, ls)
 
         listed = s.shadow_list and has_lights
-        if listed:   # every pixel's shadow-list light starts the frame at zero
-            ops.append((self._FILL, self.shadow_light, 24 * self.n_q, "render.shadow"))
         for (rp, (g_both, g_accumulate, g_finish, g_scatter, g_finish_list), raygen_size, _), \
                 sz in zip(self._plan, sizes, strict=True):
+            if listed:   # each pixel's shadow-list light starts the frame at zero
+                rp = rp.copy()
+                rp["zero_light"] = 1
             bind(self.k_raygen, rp=rp)
             launch(self.k_raygen, raygen_size, None)
             if listed:   # the shading lists every level's shadow rays, one launch traces them
@@ -1007,7 +1007,7 @@ class Renderer:
     def _run(self, ops: list, rebind: bool) -> None:
         """Enqueue a plan: each launch one bare enqueue, its event recorded under its stage."""
         q, enqueue, record = self.rt.queue, cl.enqueue_nd_range_kernel, self.rt.timer.record
-        launch, bind, fill = self._LAUNCH, self._BIND, self._FILL
+        launch, bind = self._LAUNCH, self._BIND
         for op in ops:
             kind = op[0]
             if kind == launch:
@@ -1015,8 +1015,6 @@ class Renderer:
             elif kind == bind:
                 if rebind:
                     op[1].bind(**op[2])
-            elif kind == fill:
-                record(op[3], cl.enqueue_fill_buffer(q, op[1], self._ZERO, 0, op[2]))
             else:
                 q.flush()
 

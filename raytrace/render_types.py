@@ -117,7 +117,7 @@ AOV = np.dtype([("normal", f4), ("depth", np.float32), ("prim", np.int32), ("ins
 #: render_raygen's, render_gather's and the shadow list's per-launch values (by value, 16, 20
 #: and 16 bytes).
 RAYGEN_PARAMS = np.dtype([("q0", np.uint32), ("n_rays", np.uint32), ("zero_stats", np.uint32),
-                          ("pad", np.uint32)])
+                          ("zero_light", np.uint32)])
 GATHER_PARAMS = np.dtype([("scatter", np.uint32), ("accumulate", np.uint32), ("q0", np.uint32),
                           ("n_q", np.uint32), ("finish", np.uint32)])
 SHADOW_LIST_PARAMS = np.dtype([("main_room", np.uint32), ("full_room", np.uint32),
