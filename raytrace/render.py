@@ -264,6 +264,10 @@ def device_coop_from(rt: Runtime) -> int | None:
 #: floor before, was 1M work-items at 1080p: 0.01-0.03 ms a launch on the H200).
 LAUNCH_FLOOR = 1 << 16
 
+#: Most work-items of a render_shadow_spill launch (a grid stride covers the level's rays): it
+#: returns at once when nothing spilled, as a rule.
+SPILL_WORK_ITEMS = LAUNCH_FLOOR
+
 #: Work-items per work-group of the binned shadow kernels (kernels/render_bins.h RENDER_BIN_WG).
 BIN_WG = 256
 #: With ``cost_bins``, the levels from depth 1 whose shadow rays are binned: those whose last
@@ -927,7 +931,7 @@ class Renderer:
                     launch(k["shade_list"], ray_size, ls)
                     # the rays with no room in the list, before this level's buffers go
                     if depth >= spill_from:
-                        launch(k["shadow_spill"], (min(ray_size[0], LAUNCH_FLOOR),), ls)
+                        launch(k["shadow_spill"], (min(ray_size[0], SPILL_WORK_ITEMS),), ls)
                     if depth < deepest:
                         launch(k["scan"], scan_size, scan_ls)
                     bind(k["gather"], gp=g_both if depth < deepest else g_accumulate)

@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# The H200 runs behind BENCHMARKS.md's "NVIDIA H200, 2026-12-05 (fifteenth session)" rows.
+# Usage: bench/h200_session15.sh OUTDIR PART
+# PART steps: the shadow list's steps of this session, on the baseline scene per depth at
+#   1920x1080 with the list on, in turns twice: the fourteenth session's last tree (41e2ffd),
+#   32-byte list entries (2af2740), render_raygen zeroing the pixels' light instead of a fill (the
+#   tree), and copies of the tree whose spill launches take at most 8192 or 2048 work-items
+#   (SPILL_WORK_ITEMS); then the tree with the list off (--no-overlap: a stage per level's shadow
+#   rays) beside them. The older trees are `git archive COMMIT app kernels lbm raytrace` in
+#   $TREES/COMMIT (default .trees, carried to the device), run beside today's bench and scenes.
+# PART final: the tree whole at 1920x1080 with the list on and off in turns twice, at 3840x2160
+#   and the pool (its boat floats), on and off.
+# PART tests: the device tests of the shadow list, the shadow stages and the raygen layout.
+# The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
+set -uo pipefail
+out=${1:?OUTDIR}
+part=${2:?PART}
+trees=${TREES:-.trees}
+mkdir -p "$out"
+source "$(dirname "$0")/h200_lib.sh"
+# commit_tree DIR: the archived tree in DIR, with today's bench and scenes beside it
+commit_tree() { ln -sfn "$PWD/bench" "$1/bench"; ln -sfn "$PWD/scenes" "$1/scenes"; }
+case $part in
+steps)
+    for c in 41e2ffd 2af2740; do commit_tree "$trees/$c"; done
+    variant_tree /tmp/spill8k 's/^SPILL_WORK_ITEMS = LAUNCH_FLOOR/SPILL_WORK_ITEMS = 8192/' \
+        raytrace/render.py
+    variant_tree /tmp/spill2k 's/^SPILL_WORK_ITEMS = LAUNCH_FLOOR/SPILL_WORK_ITEMS = 2048/' \
+        raytrace/render.py
+    for rep in 1 2; do
+        for c in 41e2ffd 2af2740; do
+            in_tree "$trees/$c" bench frame $f $static --per-depth --shadow-list on \
+                --out "$out/pd_$c-$rep" | tail -1
+        done
+        lb bench frame $f $static --per-depth --shadow-list on --out "$out/pd_tree-$rep" | tail -1
+        for v in spill8k spill2k; do
+            in_tree /tmp/$v bench frame $f $static --per-depth --shadow-list on \
+                --out "$out/pd_$v-$rep" | tail -1
+        done
+    done
+    lb bench frame $f $static --per-depth --no-overlap --shadow-list off \
+        --out "$out/pd_off" | tail -1
+    ;;
+final)
+    for rep in 1 2; do
+        for l in on off; do
+            lb bench frame $f $static --shadow-list $l --out "$out/static_list${l}_$rep" | tail -1
+        done
+    done
+    for l in on off; do
+        lb bench frame $k $static --shadow-list $l --out "$out/static4k_list$l" | tail -1
+        lb bench frame $f --shadow-list $l --out "$out/pool_list$l" | tail -1
+    done
+    ;;
+tests)
+    python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_shadow_list.py \
+        tests/raytrace/test_render_shadow.py tests/raytrace/test_render_layout.py 2>&1 | tail -5
+    ;;
+*)
+    echo "unknown PART $part" >&2
+    exit 2
+    ;;
+esac
