@@ -15,7 +15,7 @@
 set -uo pipefail
 out=${1:?OUTDIR}
 part=${2:?PART}
-trees=${TREES:-.trees}
+trees=${TREES:-$PWD/.trees}
 mkdir -p "$out"
 source "$(dirname "$0")/h200_lib.sh"
 # commit_tree DIR: the archived tree in DIR, with today's bench and scenes beside it
