@@ -5,7 +5,9 @@
 #   1920x1080 with the list on, in turns twice: the fourteenth session's last tree (41e2ffd),
 #   32-byte list entries (2af2740), render_raygen zeroing the pixels' light instead of a fill (the
 #   tree), and copies of the tree whose spill launches take at most 8192 or 2048 work-items
-#   (SPILL_WORK_ITEMS); then the tree with the list off (--no-overlap: a stage per level's shadow
+#   (SPILL_WORK_ITEMS), and copies whose shading lists every ray in the main part with no
+#   order (noclass: no full part, no crossings first) or with no crossings first (nocross), the
+#   same images in another order; then the tree with the list off (--no-overlap: a stage per level's shadow
 #   rays) beside them. The older trees are `git archive COMMIT app kernels lbm raytrace` in
 #   $TREES/COMMIT (default .trees, carried to the device), run beside today's bench and scenes.
 # PART final: the tree whole at 1920x1080 with the list on and off in turns twice, at 3840x2160
@@ -27,13 +29,19 @@ steps)
         raytrace/render.py
     variant_tree /tmp/spill2k 's/^SPILL_WORK_ITEMS = LAUNCH_FLOOR/SPILL_WORK_ITEMS = 2048/' \
         raytrace/render.py
+    variant_tree /tmp/noclass '/light_buffer_full(LIGHT_BUFFER_ARGS, l, o.org) ? LIST_FULL/d' \
+        kernels/render_shadow_list.cl \
+        's/: o.medium >= 0 ? LIST_CROSSING : LIST_OTHER;/: LIST_OTHER;/' \
+        kernels/render_shadow_list.cl
+    variant_tree /tmp/nocross 's/: o.medium >= 0 ? LIST_CROSSING : LIST_OTHER;/: LIST_OTHER;/' \
+        kernels/render_shadow_list.cl
     for rep in 1 2; do
         for c in 41e2ffd 2af2740; do
             in_tree "$trees/$c" bench frame $f $static --per-depth --shadow-list on \
                 --out "$out/pd_$c-$rep" | tail -1
         done
         lb bench frame $f $static --per-depth --shadow-list on --out "$out/pd_tree-$rep" | tail -1
-        for v in spill8k spill2k; do
+        for v in spill8k spill2k noclass nocross; do
             in_tree /tmp/$v bench frame $f $static --per-depth --shadow-list on \
                 --out "$out/pd_$v-$rep" | tail -1
         done
