@@ -148,35 +148,10 @@ inline bool shadow_site(RENDER_GEOM_PARAMS, __constant const RenderParams* prm,
     return shadow_site_of(g_mat, prm, &r, &h, &s, cp, o);
 }
 
-/* Light li at site o unshadowed: the direction to it and its distance (INFINITY: directional),
- * its irradiance E and the Phong BRDF times the cosine; false when it adds nothing (behind the
- * surface, outside a spot's cone). */
-inline bool light_term(const ShadowSite* o, const Light li, float3* ldir, float* dist, float3* E,
-                       float3* brdf)
-{
-    if (li.kind == LIGHT_SPOT) {
-        const float3 to = li.position.xyz - o->s.p;
-        *dist = length(to);
-        *ldir = to / *dist;
-        *E = li.color.xyz * (smooth01(li.cos_outer, li.cos_inner, dot(-*ldir, li.direction.xyz))
-                             / (*dist * *dist));
-    } else {
-        *ldir = -li.direction.xyz;
-        *dist = INFINITY;
-        *E = li.color.xyz;
-    }
-    const float ndl = dot(o->nf_s, *ldir);
-    if (ndl <= 0.0f || dot(o->nf_g, *ldir) <= 0.0f || max3(*E) <= 0.0f) return false;
-    const float rv = fmax(dot(reflect_dir(-*ldir, o->nf_s), -o->d), 0.0f);
-    const float spec = o->specular.w > 0.0f ? pow(rv, o->specular.w) : 1.0f;
-    *brdf = o->s.kd * ndl + o->specular.xyz * spec;
-    return true;
-}
-
-/* The shadow ray from org towards light li: its unit direction and length (INFINITY:
- * directional). Every shadow stage traces this ray, from the offset origin to the light (a spot's
- * light_term direction leaves from the surface point), so that a list entry (ShadowRay) need not
- * carry it: the list's kernel derives the same ray from the origin and the light. */
+/* The ray from org towards light li: its unit direction and length (INFINITY: directional).
+ * light_term takes it from the surface point; every shadow stage traces it from the offset
+ * origin, so that a list entry (ShadowRay) need not carry it: the list's kernel derives the
+ * same ray from the origin and the light. */
 inline void shadow_ray_toward(const Light li, float3 org, float3* dir, float* tmax)
 {
     if (li.kind == LIGHT_SPOT) {
@@ -187,6 +162,25 @@ inline void shadow_ray_toward(const Light li, float3 org, float3* dir, float* tm
         *dir = -li.direction.xyz;
         *tmax = INFINITY;
     }
+}
+
+/* Light li at site o unshadowed: the direction to it and its distance (INFINITY: directional),
+ * its irradiance E and the Phong BRDF times the cosine; false when it adds nothing (behind the
+ * surface, outside a spot's cone). */
+inline bool light_term(const ShadowSite* o, const Light li, float3* ldir, float* dist, float3* E,
+                       float3* brdf)
+{
+    shadow_ray_toward(li, o->s.p, ldir, dist);
+    *E = li.kind == LIGHT_SPOT
+             ? li.color.xyz * (smooth01(li.cos_outer, li.cos_inner, dot(-*ldir, li.direction.xyz))
+                               / (*dist * *dist))
+             : li.color.xyz;
+    const float ndl = dot(o->nf_s, *ldir);
+    if (ndl <= 0.0f || dot(o->nf_g, *ldir) <= 0.0f || max3(*E) <= 0.0f) return false;
+    const float rv = fmax(dot(reflect_dir(-*ldir, o->nf_s), -o->d), 0.0f);
+    const float spec = o->specular.w > 0.0f ? pow(rv, o->specular.w) : 1.0f;
+    *brdf = o->s.kd * ndl + o->specular.xyz * spec;
+    return true;
 }
 
 /* Whether light that adds E brdf at site o goes unshadowed, with no shadow ray: it adds less than
