@@ -17,3 +17,12 @@ variant_tree() {
 }
 # in_tree DIR ARGS...: lbwater ARGS run from the copy in DIR
 in_tree() { local w=$1; shift; (cd "$w" && PYTHONPATH=/tmp/site:$w python3 -m app.cli "$@"); }
+# list_4k_and_pool OUT: the baseline scene at 3840x2160 and the pool at 1920x1080, each with the
+# shadow list on and off (RenderSettings.shadow_list)
+list_4k_and_pool() {
+    local l
+    for l in on off; do
+        lb bench frame $k $static --shadow-list $l --out "$1/static4k_list$l" | tail -1
+        lb bench frame $f --shadow-list $l --out "$1/pool_list$l" | tail -1
+    done
+}

@@ -37,10 +37,7 @@ list)
             lb bench frame $f $static --shadow-list $l --out "$out/static_list${l}_$rep" | tail -1
         done
     done
-    for l in on off; do
-        lb bench frame $k $static --shadow-list $l --out "$out/static4k_list$l" | tail -1
-        lb bench frame $f --shadow-list $l --out "$out/pool_list$l" | tail -1
-    done
+    list_4k_and_pool "$out"
     ;;
 fallback)
     variant_tree /tmp/nofb 's/if (in_full || slot < lp.main_room) {/if (1) {/' \
