@@ -12,6 +12,11 @@
 #   $TREES/COMMIT (default .trees, carried to the device), run beside today's bench and scenes.
 # PART final: the tree whole at 1920x1080 with the list on and off in turns twice, at 3840x2160
 #   and the pool (its boat floats), on and off.
+# PART whole: the whole frame at 1920x1080 in turns three times: 41e2ffd with the list on, the
+#   tree with the list on and off; then 41e2ffd at 3840x2160 with the list on, the tree at
+#   3840x2160 and the pool on and off; then per depth, in turns twice, 41e2ffd and the tree with
+#   the list on, and the tree with the list off (--no-overlap). The steps and final parts'
+#   figures again, on whichever card the device machine lends (an H100 or an H200).
 # PART tests: the device tests of the shadow list, the shadow stages and the raygen layout.
 # The device machine needs the OpenCL ICD and the wheels first (bench/h200_session3.sh says how).
 set -uo pipefail
@@ -56,6 +61,26 @@ final)
         done
     done
     list_4k_and_pool "$out"
+    ;;
+whole)
+    commit_tree "$trees/41e2ffd"
+    for rep in 1 2 3; do
+        in_tree "$trees/41e2ffd" bench frame $f $static --shadow-list on \
+            --out "$out/whole_41e2ffd_$rep" | tail -1
+        for l in on off; do
+            lb bench frame $f $static --shadow-list $l --out "$out/whole_list${l}_$rep" | tail -1
+        done
+    done
+    in_tree "$trees/41e2ffd" bench frame $k $static --shadow-list on --out "$out/whole4k_41e2ffd" |
+        tail -1
+    list_4k_and_pool "$out"
+    for rep in 1 2; do
+        in_tree "$trees/41e2ffd" bench frame $f $static --per-depth --shadow-list on \
+            --out "$out/pd_41e2ffd-$rep" | tail -1
+        lb bench frame $f $static --per-depth --shadow-list on --out "$out/pd_tree-$rep" | tail -1
+    done
+    lb bench frame $f $static --per-depth --no-overlap --shadow-list off \
+        --out "$out/pd_off" | tail -1
     ;;
 tests)
     python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_shadow_list.py \

@@ -265,7 +265,9 @@ def device_coop_from(rt: Runtime) -> int | None:
 LAUNCH_FLOOR = 1 << 16
 
 #: Most work-items of a render_shadow_spill launch (a grid stride covers the level's rays): it
-#: returns at once when nothing spilled, as a rule.
+#: returns at once when nothing spilled, as a rule. 8192 or 2048 saved 0.003 ms of the five
+#: empty launches' 0.024 on an H100 (BENCHMARKS.md, fifteenth session), and would leave a
+#: frame whose list overflows 8-32 times the rounds over a level's million rays: kept at the floor.
 SPILL_WORK_ITEMS = LAUNCH_FLOOR
 
 #: Work-items per work-group of the binned shadow kernels (kernels/render_bins.h RENDER_BIN_WG).
