@@ -27,6 +27,11 @@ mkdir -p "$out"
 source "$(dirname "$0")/h200_lib.sh"
 # commit_tree DIR: the archived tree in DIR, with today's bench and scenes beside it
 commit_tree() { ln -sfn "$PWD/bench" "$1/bench"; ln -sfn "$PWD/scenes" "$1/scenes"; }
+# per_depth_list_off OUT: the tree per depth with per-level shadow launches (--no-overlap)
+per_depth_list_off() {
+    lb bench frame $f $static --per-depth --no-overlap --shadow-list off --out "$1/pd_off" |
+        tail -1
+}
 case $part in
 steps)
     for c in 41e2ffd 2af2740; do commit_tree "$trees/$c"; done
@@ -51,8 +56,7 @@ steps)
                 --out "$out/pd_$v-$rep" | tail -1
         done
     done
-    lb bench frame $f $static --per-depth --no-overlap --shadow-list off \
-        --out "$out/pd_off" | tail -1
+    per_depth_list_off "$out"
     ;;
 final)
     for rep in 1 2; do
@@ -79,8 +83,7 @@ whole)
             --out "$out/pd_41e2ffd-$rep" | tail -1
         lb bench frame $f $static --per-depth --shadow-list on --out "$out/pd_tree-$rep" | tail -1
     done
-    lb bench frame $f $static --per-depth --no-overlap --shadow-list off \
-        --out "$out/pd_off" | tail -1
+    per_depth_list_off "$out"
     ;;
 tests)
     python3 -m pytest -q -p no:cacheprovider tests/raytrace/test_shadow_list.py \
